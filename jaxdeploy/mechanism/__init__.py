@@ -1,0 +1,41 @@
+"""Planar multibody mechanisms: bodies, ideal joints, force elements, clearance joints."""
+
+from .assembly import AssemblyError, ConsistentState, consistent_state
+from .bodies import GROUND, Body, Kinematics
+from .clearance import RevoluteClearance
+from .element import AbstractElement, Wrench
+from .forces import (
+    AppliedForce,
+    AppliedTorque,
+    CoilSpringDrive,
+    Gravity,
+    Latch,
+    RotationalSpring,
+    Spring,
+)
+from .joints import AngleDriver, Prismatic, Revolute, Weld
+from .system import Mechanism
+
+__all__ = [
+    "GROUND",
+    "AbstractElement",
+    "AngleDriver",
+    "AppliedForce",
+    "AppliedTorque",
+    "AssemblyError",
+    "Body",
+    "CoilSpringDrive",
+    "ConsistentState",
+    "Gravity",
+    "Kinematics",
+    "Latch",
+    "Mechanism",
+    "Prismatic",
+    "Revolute",
+    "RevoluteClearance",
+    "RotationalSpring",
+    "Spring",
+    "Weld",
+    "Wrench",
+    "consistent_state",
+]

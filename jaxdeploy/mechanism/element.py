@@ -1,0 +1,66 @@
+"""The interface every joint and force element implements.
+
+An element may contribute constraint equations `Φ_e(q, t) = 0` (ideal joints), generalized
+forces (force elements, clearance joints) and a memory state that changes only between time
+steps (the impact velocity of a clearance joint, the latch's engaged flag). The mechanism sums
+what its elements provide; an element that provides nothing of a kind adds nothing to the trace.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar, NamedTuple
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from .bodies import Kinematics
+
+
+class Wrench(NamedTuple):
+    """A force `force` acting at global point `point` of `body`, plus a pure `torque`."""
+
+    body: str
+    force: Array | None = None
+    point: Array | None = None
+    torque: Array | None = None
+
+
+class AbstractElement(eqx.Module):
+    """Base of all joints and force elements (abstract; subclasses are final).
+
+    Subclasses override what they provide:
+    - `n_constraints` and `constraint(kin, t)` for ideal joints;
+    - `wrenches(kin, t, memory)` for forces;
+    - `has_memory`, `init_memory`, `memory_for_step`, `memory_after_step` for state that
+      changes between steps only (it is held fixed while Newton solves a step, which keeps the
+      step's residual smooth).
+    """
+
+    n_constraints: ClassVar[int] = 0
+    has_memory: ClassVar[bool] = False
+
+    def constraint(self, kin: Kinematics, t) -> Array:
+        return jnp.zeros((0,), dtype=kin.q.dtype)
+
+    def wrenches(self, kin: Kinematics, t, memory) -> list[Wrench]:
+        return []
+
+    def bodies(self) -> tuple[str, ...]:
+        """Names of the bodies this element touches (for validation)."""
+        return ()
+
+    def init_memory(self, kin: Kinematics):
+        return None
+
+    def memory_for_step(self, memory, kin: Kinematics):
+        """Memory used throughout the step that starts at state `kin`."""
+        return memory
+
+    def memory_after_step(self, memory, kin: Kinematics):
+        """Memory after an accepted step that ended at state `kin`."""
+        return memory
+
+    def idealized(self) -> AbstractElement:
+        """This element with clearances removed (the ideal-joint reference)."""
+        return self

@@ -1,0 +1,205 @@
+"""A planar mechanism: bodies plus elements, and the functions the integrators need.
+
+Equations of motion in absolute coordinates (DESIGN §2.1; Nikravesh 1988; Haug 1989):
+
+    M q̈ + Φ_q(q, t)ᵀ λ = Q(q, q̇, t; memory),     Φ(q, t) = 0      (index-3 DAE)
+
+`M` is constant and diagonal (m, m, J per body). The topology (which bodies, which elements)
+is static Python data; every number is a JAX array leaf of this pytree, so `jit`, `vmap` and
+`grad` see parameters as data and a changed number never recompiles.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from .bodies import GROUND, Body, Kinematics, cross
+from .element import AbstractElement
+
+
+class Mechanism(eqx.Module):
+    """Bodies, ground points and elements (joints, forces, clearance joints).
+
+    **Arguments:**
+    - `bodies`: the moving bodies, in coordinate order (`q = [x₀, y₀, θ₀, x₁, …]`).
+    - `elements`: joints and force elements.
+    - `ground_points`: `{name: (x, y)}` global points usable with body `"ground"`.
+    """
+
+    bodies: tuple[Body, ...]
+    elements: tuple[AbstractElement, ...]
+    ground_points: dict[str, Array]
+
+    def __init__(self, bodies, elements, ground_points=None):
+        self.bodies = tuple(bodies)
+        self.elements = tuple(elements)
+        self.ground_points = {
+            k: jnp.asarray(v, dtype=float) for k, v in (ground_points or {}).items()
+        }
+        names = [b.name for b in self.bodies]
+        if len(set(names)) != len(names):
+            raise ValueError(f"body names must be unique, got {names}")
+        for element in self.elements:
+            for body in element.bodies():
+                if body != GROUND and body not in names:
+                    raise ValueError(
+                        f"{type(element).__name__} refers to unknown body {body!r}; "
+                        f"known bodies: {[GROUND, *names]}"
+                    )
+            for body_field, point_field in (
+                ("body_a", "point_a"),
+                ("body_b", "point_b"),
+                ("bearing_body", "bearing_point"),
+                ("journal_body", "journal_point"),
+                ("body", "point"),
+            ):
+                body, point = (
+                    getattr(element, body_field, None),
+                    getattr(element, point_field, None),
+                )
+                if isinstance(point, str):
+                    self.point(body, point)  # raises with the list of known points
+
+    # --- topology -------------------------------------------------------------------------
+
+    def body_index(self, name: str) -> int:
+        for k, body in enumerate(self.bodies):
+            if body.name == name:
+                return k
+        raise KeyError(f"unknown body {name!r}; known: {[b.name for b in self.bodies]}")
+
+    def point(self, body: str, name: str) -> Array:
+        points = self.ground_points if body == GROUND else self.bodies[self.body_index(body)].points
+        if name not in points:
+            raise KeyError(f"body {body!r} has no point {name!r}; known: {sorted(points)}")
+        return points[name]
+
+    @property
+    def n_coordinates(self) -> int:
+        return 3 * len(self.bodies)
+
+    @property
+    def n_constraints(self) -> int:
+        return sum(e.n_constraints for e in self.elements)
+
+    @property
+    def degrees_of_freedom(self) -> int:
+        """Grübler count `3 n_b − m` (assumes independent constraints)."""
+        return self.n_coordinates - self.n_constraints
+
+    def find(self, element_type) -> list[int]:
+        """Indices of the elements of a given type."""
+        return [i for i, e in enumerate(self.elements) if isinstance(e, element_type)]
+
+    def idealized(self) -> Mechanism:
+        """The same mechanism with every clearance joint replaced by an ideal revolute joint."""
+        return Mechanism(self.bodies, [e.idealized() for e in self.elements], self.ground_points)
+
+    def replace_element(self, index: int, element: AbstractElement) -> Mechanism:
+        elements = list(self.elements)
+        elements[index] = element
+        return Mechanism(self.bodies, elements, self.ground_points)
+
+    # --- dynamics ---------------------------------------------------------------------------
+
+    def kinematics(self, q, v=None) -> Kinematics:
+        return Kinematics(self, q, v)
+
+    def mass_diagonal(self) -> Array:
+        """Diagonal of M: `(m₀, m₀, J₀, m₁, m₁, J₁, …)`."""
+        return jnp.concatenate([jnp.stack([b.mass, b.mass, b.inertia]) for b in self.bodies])
+
+    def constraints(self, q, t) -> Array:
+        """`Φ(q, t)`, stacked over the elements that constrain."""
+        kin = self.kinematics(q)
+        rows = [e.constraint(kin, t) for e in self.elements if e.n_constraints]
+        if not rows:
+            return jnp.zeros((0,), dtype=q.dtype)
+        return jnp.concatenate(rows)
+
+    def constraint_jacobian(self, q, t) -> Array:
+        """`Φ_q` (m × n), by forward-mode differentiation."""
+        return jax.jacfwd(self.constraints)(q, t)
+
+    def constraint_velocity_rhs(self, q, t) -> Array:
+        """`−Φ_t`, so that the velocity constraint reads `Φ_q q̇ = −Φ_t`."""
+        return -jax.jacfwd(self.constraints, argnums=1)(q, t)
+
+    def constraint_acceleration_rhs(self, q, v, t) -> Array:
+        """`γ = −(Φ_q q̇)_q q̇ − 2 Φ_qt q̇ − Φ_tt`, so that `Φ_q q̈ = γ`.
+
+        Computed as `−d²/ds² Φ(q + s q̇, t + s)` at s = 0 (nested JVPs, no Hessian formed).
+        """
+
+        def along(s):
+            return self.constraints(q + s * v, t + s)
+
+        def first(s):
+            return jax.jvp(along, (s,), (jnp.ones_like(s),))[1]
+
+        s0 = jnp.zeros((), dtype=q.dtype)
+        return -jax.jvp(first, (s0,), (jnp.ones_like(s0),))[1]
+
+    def generalized_forces(self, q, v, t, memory) -> Array:
+        """`Q(q, q̇, t)`: the sum of every element's forces and torques."""
+        kin = self.kinematics(q, v)
+        forces = jnp.zeros_like(q)
+        for element, mem in zip(self.elements, memory, strict=True):
+            for w in element.wrenches(kin, t, mem):
+                if w.body == GROUND:
+                    continue
+                k = self.body_index(w.body)
+                if w.force is not None:
+                    f = jnp.asarray(w.force)
+                    forces = forces.at[3 * k : 3 * k + 2].add(f)
+                    if w.point is not None:
+                        arm = w.point - kin.origin(w.body)
+                        forces = forces.at[3 * k + 2].add(cross(arm, f))
+                if w.torque is not None:
+                    forces = forces.at[3 * k + 2].add(w.torque)
+        return forces
+
+    # --- memory (state that changes between steps only) ---------------------------------------
+
+    def init_memory(self, q, v):
+        kin = self.kinematics(q, v)
+        return tuple(e.init_memory(kin) if e.has_memory else None for e in self.elements)
+
+    def memory_for_step(self, memory, q, v):
+        kin = self.kinematics(q, v)
+        return tuple(
+            e.memory_for_step(m, kin) if e.has_memory else None
+            for e, m in zip(self.elements, memory, strict=True)
+        )
+
+    def memory_after_step(self, memory, q, v):
+        kin = self.kinematics(q, v)
+        return tuple(
+            e.memory_after_step(m, kin) if e.has_memory else None
+            for e, m in zip(self.elements, memory, strict=True)
+        )
+
+    # --- index-1 form and energy -----------------------------------------------------------------
+
+    def accelerations(self, q, v, t, memory):
+        """Solve `[[M, Φ_qᵀ], [Φ_q, 0]] [q̈; λ] = [Q; γ]` (the index-1 system).
+
+        **Returns:** `(q̈, λ)`.
+        """
+        mass = self.mass_diagonal()
+        forces = self.generalized_forces(q, v, t, memory)
+        m = self.n_constraints
+        if m == 0:
+            return forces / mass, jnp.zeros((0,), dtype=q.dtype)
+        jac = self.constraint_jacobian(q, t)
+        gamma = self.constraint_acceleration_rhs(q, v, t)
+        n = q.shape[0]
+        kkt = jnp.block([[jnp.diag(mass), jac.T], [jac, jnp.zeros((m, m), dtype=q.dtype)]])
+        sol = jnp.linalg.solve(kkt, jnp.concatenate([forces, gamma]))
+        return sol[:n], sol[n:]
+
+    def kinetic_energy(self, v) -> Array:
+        return 0.5 * jnp.sum(self.mass_diagonal() * v**2)
