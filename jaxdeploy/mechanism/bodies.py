@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array
 
 from .._validation import check_positive
 
@@ -46,9 +46,9 @@ class Body(eqx.Module):
     """
 
     name: str = eqx.field(static=True)
-    mass: Float[Array, ""]
-    inertia: Float[Array, ""]
-    points: dict[str, Float[Array, 2]]
+    mass: Array
+    inertia: Array
+    points: dict[str, Array]
 
     def __init__(self, name: str, mass, inertia, points=None):
         if name == GROUND:
