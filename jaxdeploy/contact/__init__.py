@@ -1,0 +1,80 @@
+"""Contact laws for revolute clearance joints with rough surfaces (DESIGN §2.3–2.5).
+
+Pure JAX, float64, jit/vmap/grad-safe. Laws are small `eqx.Module`s (numbers are array leaves,
+exponents and shapes are static), so a scene composes exactly the laws it uses. See
+`docs/contact.md` for the model, equations and sources.
+"""
+
+from .damping import (
+    VELOCITY_FLOOR,
+    AbstractNormalLaw,
+    AbstractRestitutionLaw,
+    Flores,
+    Gonthier,
+    HuGuo,
+    HuntCrossley,
+    HuntCrossleyMaterial,
+    LankaraniNikravesh,
+    Undamped,
+)
+from .elastic import (
+    AbstractElasticLaw,
+    HertzElastic,
+    RoughElastic,
+)
+from .friction import (
+    AbstractFrictionLaw,
+    AmbrosioCoulomb,
+    SmoothCoulomb,
+    StribeckFriction,
+    regularized_sign,
+)
+from .gaussian_moments import (
+    gaussian_moment,
+    gaussian_smoothed_power,
+    positive_power,
+)
+from .roughness import (
+    RestitutionRoughnessCoupling,
+    RoughnessCoupling,
+    combine_sigma,
+    ra_to_sigma,
+    sigma_to_ra,
+)
+from .stiffness import (
+    effective_modulus,
+    effective_radius,
+    journal_bearing_stiffness,
+)
+
+__all__ = [
+    "VELOCITY_FLOOR",
+    "AbstractNormalLaw",
+    "AbstractRestitutionLaw",
+    "Flores",
+    "Gonthier",
+    "HuGuo",
+    "HuntCrossley",
+    "HuntCrossleyMaterial",
+    "LankaraniNikravesh",
+    "Undamped",
+    "AbstractElasticLaw",
+    "HertzElastic",
+    "RoughElastic",
+    "AbstractFrictionLaw",
+    "AmbrosioCoulomb",
+    "SmoothCoulomb",
+    "StribeckFriction",
+    "regularized_sign",
+    "gaussian_moment",
+    "gaussian_smoothed_power",
+    "positive_power",
+    "RestitutionRoughnessCoupling",
+    "RoughnessCoupling",
+    "combine_sigma",
+    "ra_to_sigma",
+    "sigma_to_ra",
+    "effective_modulus",
+    "effective_radius",
+    "journal_bearing_stiffness",
+]

@@ -1,0 +1,178 @@
+"""Tangential friction laws `F_T(v_t, F_N)` for the clearance joint.
+
+Every law returns the *signed* friction magnitude along +t: odd in the sliding speed `v_t`
+(m/s) and bounded by `μ_max F_N`. The caller applies it against sliding, i.e. the journal gets
+`−F_T t` (DESIGN §2.2). All laws are smooth enough that gradients are finite at `v_t = 0`:
+the sign is regularised with an explicit slip velocity, never `tanh(100 v)`-style hidden widths
+(those gave NaN identification gradients; LITERATURE §1.5).
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import Literal
+
+import equinox as eqx
+import jax.numpy as jnp
+from jax import Array
+from jax.typing import ArrayLike
+
+from .._validation import check_nonnegative, check_positive
+
+__all__ = [
+    "AbstractFrictionLaw",
+    "regularized_sign",
+    "SmoothCoulomb",
+    "AmbrosioCoulomb",
+    "StribeckFriction",
+]
+
+
+def _float_array(x):
+    return jnp.asarray(x, dtype=float)
+
+
+def regularized_sign(v, slip_velocity, shape: str = "algebraic"):
+    """Smooth sign function with width `v_s`.
+
+    **Arguments:**
+
+    - `v`: speed (m/s).
+    - `slip_velocity`: `v_s` > 0 (m/s).
+    - `shape`: `"algebraic"` → `v/sqrt(v² + v_s²)` (default), `"tanh"` → `tanh(v/v_s)`.
+
+    **Returns:** a C^∞, odd function of `v` with values in (−1, 1).
+
+    **References:** Pennestrì et al., *Nonlinear Dyn.* 83 (2016) 1785; Marques et al.,
+    *Nonlinear Dyn.* 86 (2016) 1407 [recalled]; LITERATURE.md §1.5.
+    """
+    v = jnp.asarray(v, dtype=float)
+    if shape == "algebraic":
+        return v / jnp.sqrt(v * v + slip_velocity**2)
+    if shape == "tanh":
+        return jnp.tanh(v / slip_velocity)
+    raise ValueError(f"shape = {shape!r} is invalid: use 'algebraic' or 'tanh'.")
+
+
+class AbstractFrictionLaw(eqx.Module):
+    """`force(v_t, normal_force) -> F_T`, signed along +t, `|F_T| ≤ μ_max F_N`."""
+
+    @abc.abstractmethod
+    def force(self, v_t: ArrayLike, normal_force: ArrayLike) -> Array:
+        """Signed friction magnitude (N)."""
+
+
+class SmoothCoulomb(AbstractFrictionLaw):
+    """Regularised Coulomb friction `F_T = μ F_N s(v_t)`, `s` a smooth sign of width `v_s`.
+
+    **Arguments:**
+
+    - `mu`: μ ≥ 0.
+    - `slip_velocity`: `v_s` > 0 (m/s), default 1e-3. Explicit on purpose: it is the
+      regularisation width, and a differentiable hyperparameter.
+    - `shape`: static, `"algebraic"` (`v/sqrt(v² + v_s²)`, default) or `"tanh"`.
+
+    **References:** LITERATURE.md §1.5; DESIGN.md §2.4.
+    """
+
+    mu: Array = eqx.field(converter=_float_array)
+    slip_velocity: Array = eqx.field(converter=_float_array, default=1e-3)
+    shape: Literal["algebraic", "tanh"] = eqx.field(static=True, default="algebraic")
+
+    def __check_init__(self):
+        check_nonnegative("mu", self.mu)
+        check_positive("slip_velocity", self.slip_velocity, unit="m/s")
+        if self.shape not in ("algebraic", "tanh"):
+            raise ValueError(f"shape = {self.shape!r} is invalid: use 'algebraic' or 'tanh'.")
+
+    def force(self, v_t: ArrayLike, normal_force: ArrayLike) -> Array:
+        """`μ F_N s(v_t)` (N)."""
+        return self.mu * normal_force * regularized_sign(v_t, self.slip_velocity, self.shape)
+
+
+class AmbrosioCoulomb(AbstractFrictionLaw):
+    """Ambrósio's modified Coulomb law `F_T = μ c_d(|v_t|) F_N sign(v_t)`.
+
+    `c_d = 0` for `|v_t| ≤ v0`, `(|v_t| − v0)/(v1 − v0)` between, 1 above `v1` (no stiction).
+    `transition="smoothstep"` replaces the ramp by the C¹ `c_d = s²(3 − 2s)`.
+
+    The dynamic correction acts on the *speed* `|v_t|`: the DyS code applies it to the signed
+    `v_t`, which gives `c_d = 0` for all negative `v_t` (friction only in one direction) — a
+    bug we do not copy (LITERATURE §1.5). Since `c_d = 0` near `v_t = 0`, the sign's jump is
+    never seen and the gradient at `v_t = 0` is 0.
+
+    **Arguments:**
+
+    - `mu`: μ ≥ 0.
+    - `v0`, `v1`: tolerance velocities (m/s), `0 ≤ v0 < v1`; defaults 1e-4, 1e-3.
+    - `transition`: static, `"linear"` (the published law, default) or `"smoothstep"`.
+
+    **References:** Ambrósio, *Virtual Nonlinear Multibody Systems* (2003) [recalled];
+    Flores et al. (2008); LITERATURE.md §1.5.
+    """
+
+    mu: Array = eqx.field(converter=_float_array)
+    v0: Array = eqx.field(converter=_float_array, default=1e-4)
+    v1: Array = eqx.field(converter=_float_array, default=1e-3)
+    transition: Literal["linear", "smoothstep"] = eqx.field(static=True, default="linear")
+
+    def __check_init__(self):
+        check_nonnegative("mu", self.mu)
+        check_nonnegative("v0", self.v0, unit="m/s")
+        check_positive("v1 - v0", self.v1 - self.v0, unit="m/s")
+        if self.transition not in ("linear", "smoothstep"):
+            raise ValueError(
+                f"transition = {self.transition!r} is invalid: use 'linear' or 'smoothstep'."
+            )
+
+    def dynamic_correction(self, v_t: ArrayLike) -> Array:
+        """`c_d(|v_t|) ∈ [0, 1]`."""
+        speed = jnp.abs(jnp.asarray(v_t, dtype=float))
+        s = jnp.clip((speed - self.v0) / (self.v1 - self.v0), 0.0, 1.0)
+        if self.transition == "smoothstep":
+            return s * s * (3.0 - 2.0 * s)
+        return s
+
+    def force(self, v_t: ArrayLike, normal_force: ArrayLike) -> Array:
+        """`μ c_d(|v_t|) F_N sign(v_t)` (N)."""
+        v_t = jnp.asarray(v_t, dtype=float)
+        return self.mu * self.dynamic_correction(v_t) * normal_force * jnp.sign(v_t)
+
+
+class StribeckFriction(AbstractFrictionLaw):
+    """Smooth Coulomb friction with a Stribeck peak at low speed.
+
+    `F_T = F_N s(v_t) [μ_k + (μ_s − μ_k) exp(−(v_t/v_st)²)]`, `s(v) = v/sqrt(v² + v_s²)`.
+
+    **Arguments:**
+
+    - `mu_static`: μ_s ≥ 0 (peak, reached for `v_s ≪ |v_t| ≪ v_st`).
+    - `mu_kinetic`: μ_k ≥ 0 (sliding).
+    - `stribeck_velocity`: `v_st` > 0 (m/s).
+    - `slip_velocity`: `v_s` > 0 (m/s), regularisation width of the sign (≪ v_st).
+
+    `|F_T| ≤ max(μ_s, μ_k) F_N`.
+
+    **References:** Bengisu, Akay; Stribeck (1902) [recalled]; LITERATURE.md §1.5.
+    """
+
+    mu_static: Array = eqx.field(converter=_float_array)
+    mu_kinetic: Array = eqx.field(converter=_float_array)
+    stribeck_velocity: Array = eqx.field(converter=_float_array)
+    slip_velocity: Array = eqx.field(converter=_float_array, default=1e-4)
+
+    def __check_init__(self):
+        check_nonnegative("mu_static", self.mu_static)
+        check_nonnegative("mu_kinetic", self.mu_kinetic)
+        check_positive("stribeck_velocity", self.stribeck_velocity, unit="m/s")
+        check_positive("slip_velocity", self.slip_velocity, unit="m/s")
+
+    def coefficient(self, v_t: ArrayLike) -> Array:
+        """Speed-dependent coefficient `μ(v_t) = μ_k + (μ_s − μ_k) exp(−(v_t/v_st)²)`."""
+        ratio = jnp.asarray(v_t, dtype=float) / self.stribeck_velocity
+        return self.mu_kinetic + (self.mu_static - self.mu_kinetic) * jnp.exp(-ratio * ratio)
+
+    def force(self, v_t: ArrayLike, normal_force: ArrayLike) -> Array:
+        """`μ(v_t) F_N s(v_t)` (N)."""
+        sign = regularized_sign(v_t, self.slip_velocity)
+        return self.coefficient(v_t) * normal_force * sign
