@@ -80,11 +80,11 @@ def assemble_positions(
             jac = jax.jacfwd(phi)(q)
             step = jnp.linalg.lstsq(jac, phi(q))[0]
             q = q - step
-            res = jnp.max(jnp.abs(phi(q)))
+            res = jnp.max(jnp.abs(phi(q)), initial=0.0)
             return q, res, it + 1
 
         q0 = z0[0]
-        q, res, it = jax.lax.while_loop(cond, body, (q0, jnp.max(jnp.abs(phi(q0))), 0))
+        q, res, it = jax.lax.while_loop(cond, body, (q0, jnp.max(jnp.abs(phi(q0)), initial=0.0), 0))
         jac = jax.jacfwd(phi)(q)
         mu = jnp.linalg.lstsq(jac.T, q_guess - q)[0]
         return (q, mu), (res, it)
@@ -95,6 +95,8 @@ def assemble_positions(
         return unravel(jnp.linalg.solve(jac, flat))
 
     n_rows = mechanism.n_constraints + len(fixed)
+    if n_rows == 0:
+        return q_guess, jnp.zeros(()), 0
     z0 = (q_guess, jnp.zeros(n_rows, dtype=q_guess.dtype))
     (q, _), (res, it) = jax.lax.custom_root(kkt, z0, newton, tangent_solve, has_aux=True)
     return q, res, it

@@ -1,0 +1,78 @@
+"""Headline numbers and figures of a slider-crank run (as in Flores' clearance-joint papers:
+journal orbit, contact force, slider acceleration against the ideal mechanism)."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .contact_forces import clearance_joint_history
+
+
+def slider_crank_summary(scene, params, mechanism, trajectory) -> dict:
+    slider = 3 * mechanism.body_index("slider")
+    acc = np.asarray(trajectory.qdd[:, slider])
+    summary = {
+        "slider_acc_min": float(np.min(acc)),
+        "slider_acc_max": float(np.max(acc)),
+    }
+    joints = clearance_joint_history(mechanism, trajectory)
+    if joints:
+        forces = np.concatenate([np.asarray(h["normal_force"]) for h in joints.values()])
+        summary["max_contact_force"] = float(np.max(forces))
+    else:
+        summary["max_contact_force"] = 0.0
+    return summary
+
+
+def plot_slider_crank(scene, params, mechanism, trajectory, out_dir) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..scenes.slider_crank import ideal_slider_kinematics
+
+    ts = np.asarray(trajectory.ts)
+    crank_angle = np.degrees(float(params["crank_speed"]) * ts)
+    slider = 3 * mechanism.body_index("slider")
+    _, _, a_ideal = ideal_slider_kinematics(
+        float(params["crank_length"]), float(params["rod_length"]), float(params["crank_speed"]), ts
+    )
+    files = []
+    fig, ax = plt.subplots(figsize=(7, 4))
+    ax.plot(crank_angle, np.asarray(trajectory.qdd[:, slider]), lw=0.8, label="clearance joint")
+    ax.plot(crank_angle, a_ideal, "k--", lw=1.0, label="ideal joint (closed form)")
+    ax.set_xlabel("crank angle [deg]")
+    ax.set_ylabel("slider acceleration [m/s²]")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path = os.path.join(out_dir, "slider_acceleration.png")
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+    files.append(path)
+
+    joints = clearance_joint_history(mechanism, trajectory)
+    for history in joints.values():
+        c = float(params["clearance"])
+        ecc = np.asarray(history["eccentricity"])
+        fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4.2))
+        circle = np.linspace(0, 2 * np.pi, 200)
+        ax1.plot(c * np.cos(circle) * 1e3, c * np.sin(circle) * 1e3, "k:", lw=0.8)
+        ax1.plot(ecc[:, 0] * 1e3, ecc[:, 1] * 1e3, lw=0.7)
+        ax1.set_aspect("equal")
+        ax1.set_xlabel("e_x [mm]")
+        ax1.set_ylabel("e_y [mm]")
+        ax1.set_title("journal centre relative to bearing centre")
+        ax2.plot(crank_angle, np.asarray(history["normal_force"]), lw=0.8)
+        ax2.set_xlabel("crank angle [deg]")
+        ax2.set_ylabel("normal contact force [N]")
+        ax2.grid(alpha=0.3)
+        fig.tight_layout()
+        path = os.path.join(out_dir, "journal_orbit_contact_force.png")
+        fig.savefig(path, dpi=130)
+        plt.close(fig)
+        files.append(path)
+    return files

@@ -1,0 +1,89 @@
+"""What a scene is: a mechanism builder with default parameters, an initial state, a default
+step control, and the headline numbers and plots of a run.
+
+Parameters are a flat `{name: value}` mapping in SI units. `build(params)` runs at trace time:
+it may read concrete values to decide what to compose (a friction coefficient that is exactly
+0.0 traces no friction code), and treats everything else as data, so the same scene jits,
+vmaps and differentiates over its parameters.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import ClassVar
+
+from .._validation import check_range, is_concrete
+from ..mechanism import ConsistentState, Mechanism
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """A scene parameter: default value, valid range, unit and meaning."""
+
+    default: float
+    low: float = -math.inf
+    high: float = math.inf
+    unit: str = ""
+    doc: str = ""
+    low_inclusive: bool = True
+
+
+def is_exactly_zero(value) -> bool:
+    """True only for a concrete zero: composition decisions never depend on traced values."""
+    return is_concrete(value) and float(value) == 0.0
+
+
+class Scene(abc.ABC):
+    """Base of the scenes (`pendulum`, `impact`, `slider_crank`, `deploy_array`)."""
+
+    name: ClassVar[str]
+    params: ClassVar[dict[str, ParamSpec]]
+    default_t_end: ClassVar[float]
+    default_control: ClassVar[dict]
+
+    def default_params(self) -> dict[str, float]:
+        return {k: spec.default for k, spec in self.params.items()}
+
+    def resolve_params(self, overrides: Mapping[str, float] | None = None) -> dict:
+        """Defaults updated with `overrides`; unknown names and out-of-range values raise
+        `ValueError` naming the parameter, the value and the valid range."""
+        params = self.default_params()
+        for key, value in (overrides or {}).items():
+            if key not in self.params:
+                raise ValueError(
+                    f"unknown parameter {key!r} for scene {self.name!r}; valid: "
+                    + ", ".join(sorted(self.params))
+                )
+            params[key] = value
+        for key, spec in self.params.items():
+            check_range(
+                key,
+                params[key],
+                spec.low,
+                spec.high,
+                low_inclusive=spec.low_inclusive,
+                unit=spec.unit,
+            )
+        self.check_params(params)
+        return params
+
+    def check_params(self, params: Mapping) -> None:
+        """Cross-parameter checks (override where needed)."""
+        return None
+
+    @abc.abstractmethod
+    def build(self, params: Mapping) -> Mechanism:
+        """The mechanism for these parameters (trace-time composition)."""
+
+    @abc.abstractmethod
+    def initial_state(self, params: Mapping, mechanism: Mechanism) -> ConsistentState:
+        """A consistent initial state."""
+
+    def summary(self, params, mechanism, trajectory) -> dict:
+        return {}
+
+    def plot(self, params, mechanism, trajectory, out_dir) -> list[str]:
+        return []
