@@ -21,13 +21,12 @@ from .solvers import GeneralizedAlpha, MechanismState, MechanismTerm
 
 @dataclass(frozen=True)
 class StepControl:
-    """How steps are chosen (static: changing it recompiles).
+    """How steps are chosen (static: changing it recompiles; the step `dt` itself is data).
 
-    Fixed step: `dt` only. Adaptive: `rtol` and `atol` (positions, m and rad), with `dt` as
-    the first step, `dt_min`/`dt_max` as bounds.
+    Fixed step: no tolerances. Adaptive: `rtol` and `atol` (positions, m and rad) with
+    `dt_min`/`dt_max` as bounds.
     """
 
-    dt: float | None = None
     rtol: float | None = None
     atol: float | None = None
     dt_min: float | None = None
@@ -40,8 +39,6 @@ class StepControl:
 
     def controller(self):
         if not self.adaptive:
-            if self.dt is None:
-                raise ValueError("give either dt (fixed step) or rtol/atol (adaptive step)")
             return dfx.ConstantStepSize()
         # PI coefficients suited to stiff problems (diffrax docs; LITERATURE §3.4).
         return dfx.PIDController(
@@ -92,14 +89,16 @@ def _save_times(t0, t_end, n_save, ts):
 
 
 @eqx.filter_jit
-def _solve(mechanism, y0, t0, t_end, ts, solver, control: StepControl, progress: bool, adjoint):
+def _solve(
+    mechanism, y0, t0, t_end, dt0, ts, solver, control: StepControl, progress: bool, adjoint
+):
     meter = dfx.TqdmProgressMeter() if progress else dfx.NoProgressMeter()
     sol = dfx.diffeqsolve(
         MechanismTerm(mechanism),
         solver,
         t0=t0,
         t1=t_end,
-        dt0=control.dt,
+        dt0=dt0,
         y0=y0,
         saveat=dfx.SaveAt(ts=ts, solver_state=True),
         stepsize_controller=control.controller(),
@@ -143,15 +142,20 @@ def simulate(
     **Returns:** a `Trajectory`; check `.ok` / `.status()`: a failed solve keeps the states it
     finished and says when and why it stopped.
     """
-    control = StepControl(dt, rtol, atol, dt_min, dt_max, max_steps)
-    control.controller()  # validates the choice before compiling
-    if dt is None and control.adaptive:
-        control = StepControl(1e-6, rtol, atol, dt_min, dt_max, max_steps)
+    control = StepControl(rtol, atol, dt_min, dt_max, max_steps)
+    if dt is None and not control.adaptive:
+        raise ValueError("give dt (fixed step) or rtol/atol (adaptive step)")
+    if dt is None:
+        dt = 1e-6 if dt_max is None else min(1e-6, dt_max)
+    if not dt > 0:
+        raise ValueError(f"dt = {dt!r} is invalid: it must be > 0 (s)")
+    # The step is data, not part of the compiled program: changing it does not recompile.
+    dt0 = jnp.asarray(dt, dtype=float)
     solver = GeneralizedAlpha() if solver is None else solver
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
     y0 = MechanismState(initial.q, initial.v, initial.qdd, initial.lam, initial.memory)
     ts = _save_times(t0, t_end, n_save, ts)
-    sol = _solve(mechanism, y0, t0, t_end, ts, solver, control, progress, adjoint)
+    sol = _solve(mechanism, y0, t0, t_end, dt0, ts, solver, control, progress, adjoint)
     ys = sol.ys
     stats = dict(sol.stats)
     if sol.solver_state is not None and hasattr(sol.solver_state, "newton_iterations"):
