@@ -99,7 +99,8 @@ class RoughElastic(AbstractElasticLaw):
 
     - `stiffness`: `K` (N/m^n), > 0: the Hertz stiffness of the nominal (smooth) geometry.
     - `sigma`: σ (m), ≥ 0: standard deviation of the combined peak heights
-      (`roughness.ra_to_sigma`, `roughness.combine_sigma`). σ = 0 gives `HertzElastic` exactly.
+      (`roughness.ra_to_sigma`, `roughness.combine_sigma`). σ = 0 gives `HertzElastic`
+      (to round-off).
     - `offset`: `s0` ≥ 0, in units of σ: where the clearance is measured from. 0 = between mean
       lines (GW convention, default); ≈ 3 = between peak tops (the force then starts at δ ≈ 0).
     - `exponent`: `n` (static, default 1.5).

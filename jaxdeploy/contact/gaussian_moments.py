@@ -38,7 +38,7 @@ _H_MAX = 60.0
 
 _DEEP_S = _L * _GL_X
 _DEEP_W = _L * _GL_W * np.exp(-0.5 * _DEEP_S**2) / _SQRT_2PI
-# Normalising the weights makes E[1] exact, so σ = 0 reproduces Hertz to the last bit.
+# Normalising the weights makes E[1] = 1 to round-off, so σ = 0 reproduces Hertz.
 _DEEP_W = _DEEP_W / _DEEP_W.sum()
 
 
@@ -83,7 +83,7 @@ def _shallow(h, n: float):
 def _deep(shift, scale, n: float):
     """`E[(shift + scale·Z)^n]` by Gauss–Legendre over `Z ∈ [−L, L]`, for `shift > L·scale`.
 
-    Written without dividing by `scale`, so `scale = 0` gives `shift^n` exactly (Hertz).
+    Written without dividing by `scale`, so `scale = 0` gives `shift^n` (Hertz, to round-off).
     """
     base = shift[..., None] + scale[..., None] * _DEEP_S
     return jnp.sum(_DEEP_W * positive_power(base, n), axis=-1)
@@ -132,7 +132,7 @@ def gaussian_smoothed_power(x, sigma, n: float):
 
     This is the Greenwood–Williamson average that turns the Hertz law `K δ_+^n` into the
     rough-surface law (DESIGN §2.3); it is written so that `σ = 0` is allowed and gives
-    `x_+^n` exactly, with finite gradients in `x` and `σ` there.
+    `x_+^n` (to round-off), with finite gradients in `x` and `σ` there.
 
     **Arguments:**
 

@@ -23,6 +23,9 @@ __all__ = [
     "RestitutionRoughnessCoupling",
 ]
 
+# Smallest restitution the c_e(Ra) coupling returns (keeps c_e inside (0, 1] in float64).
+RESTITUTION_FLOOR = 1e-6
+
 # For a Gaussian profile, Ra = E|z| = sqrt(2/π) σ.
 _SIGMA_PER_RA = math.sqrt(math.pi / 2.0)
 
@@ -114,7 +117,8 @@ class RestitutionRoughnessCoupling(eqx.Module):
     `c_e(Ra) = c_base^((Ra/Ra_ref)^p)`, i.e. the logarithmic loss `−ln c_e` scales as
     `(Ra/Ra_ref)^p`. Positive p: rougher surfaces dissipate more (W24's qualitative claim);
     `p = 0` (default) is the identity; `c_base = 1` stays 1 (nothing to scale). Smooth in Ra,
-    p and c_base, with finite gradients for c_base ∈ (0, 1].
+    p and c_base, with finite gradients for c_base ∈ (0, 1]. Results are floored at
+    `RESTITUTION_FLOOR = 1e-6` (far outside any physical use; avoids underflow to 0).
 
     **Arguments:**
 
@@ -136,4 +140,6 @@ class RestitutionRoughnessCoupling(eqx.Module):
     def __call__(self, base_restitution: ArrayLike, ra: ArrayLike) -> Array:
         check_range("restitution", base_restitution, 0.0, 1.0, low_inclusive=False)
         scale = _ratio_power(ra, self.reference_ra, self.sensitivity)
-        return jnp.exp(jnp.log(jnp.asarray(base_restitution, dtype=float)) * scale)
+        restitution = jnp.exp(jnp.log(jnp.asarray(base_restitution, dtype=float)) * scale)
+        # Floor: c_base^huge underflows to 0, and χ(0) is infinite for Flores/Gonthier/Hu–Guo.
+        return jnp.maximum(restitution, RESTITUTION_FLOOR)
