@@ -87,7 +87,7 @@ def assemble_positions(
         q, res, it = jax.lax.while_loop(cond, body, (q0, jnp.max(jnp.abs(phi(q0)), initial=0.0), 0))
         jac = jax.jacfwd(phi)(q)
         mu = jnp.linalg.lstsq(jac.T, q_guess - q)[0]
-        return (q, mu), (res, it)
+        return (q, mu), (res, jnp.asarray(it, dtype=float))
 
     def tangent_solve(g, y):
         flat, unravel = jax.flatten_util.ravel_pytree(y)

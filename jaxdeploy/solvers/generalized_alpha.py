@@ -166,12 +166,13 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
 
             init = (z0, jnp.array(0), jnp.array(False), jnp.array(True))
             z, it, converged, ok = jax.lax.while_loop(cond, body, init)
-            return z, (it, converged & ok)
+            # Auxiliary outputs as floats: custom_root's JVP rule mishandles int/bool aux.
+            return z, (it.astype(float), (converged & ok).astype(float))
 
         z0 = (jnp.zeros_like(q0), y0.lam / beta_p)
-        (u, mu), (iterations, converged) = jax.lax.custom_root(
-            residual, z0, newton, _flat_solve, has_aux=True
-        )
+        (u, mu), aux = jax.lax.custom_root(residual, z0, newton, _flat_solve, has_aux=True)
+        iterations = jax.lax.stop_gradient(aux[0]).astype(int)
+        converged = jax.lax.stop_gradient(aux[1]) > 0.5
 
         q1 = q_hat + u
         v1 = v_hat + gamma_p * u

@@ -1,0 +1,166 @@
+"""Generalized-α: the α convention, convergence order, accuracy against closed forms,
+derivatives through the solver."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from jaxdeploy.mechanism import Body, Mechanism, Spring
+from jaxdeploy.scenes import Impact, Pendulum, SliderCrank, ideal_slider_kinematics
+from jaxdeploy.simulation import simulate
+from jaxdeploy.solvers import GeneralizedAlpha, MechanismState, MechanismTerm, chung_hulbert
+
+
+@pytest.mark.parametrize(
+    "rho, expected",
+    [
+        # Arnold–Brüls convention (old level weighted), LITERATURE §2.1 table.
+        (0.8, (1 / 3, 4 / 9, 11 / 18, 0.25 * (11 / 18 + 0.5) ** 2)),
+        (0.5, (0.0, 1 / 3, 5 / 6, 4 / 9)),
+        (1.0, (0.5, 0.5, 0.5, 0.25)),
+    ],
+)
+def test_chung_hulbert_coefficients(rho, expected):
+    np.testing.assert_allclose(chung_hulbert(rho), expected, rtol=1e-12)
+
+
+def _oscillator(omega):
+    body = Body("mass", 1.0, 1.0, {"c": (0.0, 0.0)})
+    spring = Spring("ground", "O", "mass", "c", stiffness=omega**2, rest_length=0.0)
+    return Mechanism([body], [spring], ground_points={"O": (0.0, 0.0)})
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.5, 0.8, 1.0])
+def test_spectral_radius_at_infinity_is_rho_inf(rho):
+    """Pins the convention: the one-step map of x'' = −ω²x has spectral radius ρ∞ as hω → ∞.
+    (With the complementary PETSc/OpenSees convention the radius would differ.)"""
+    mech = _oscillator(omega=1e4)
+    solver = GeneralizedAlpha(rho_inf=rho)
+    term = MechanismTerm(mech)
+    h = 100.0  # hω = 1e6
+
+    def one_step(z):
+        x, v, qdd, a = z
+        q = jnp.array([x, 0.0, 0.0])
+        y = MechanismState(
+            q, v * jnp.array([1.0, 0, 0]), qdd * jnp.array([1.0, 0, 0]), jnp.zeros(0), (None,)
+        )
+        state = solver.init(term, 0.0, h, y, None)._replace(a=a * jnp.array([1.0, 0, 0]))
+        y1, *_, state1, _ = solver.step(term, 0.0, h, y, None, state, False)
+        return jnp.stack([y1.q[0], y1.v[0], y1.qdd[0], state1.a[0]])
+
+    jac = jax.jacfwd(one_step)(jnp.array([1e-3, 0.0, -1e5, -1e5]))
+    radius = np.max(np.abs(np.linalg.eigvals(np.asarray(jac))))
+    np.testing.assert_allclose(radius, rho, atol=2e-3)
+
+
+def _pendulum_reference(t_end, gravity=9.81, length=1.0):
+    # Independent: the pendulum's angle ODE, θ'' = −(m g L/2) cos θ / (m L²/3), by DOP853.
+    def rhs(t, y):
+        return [y[1], -(gravity * length / 2) * np.cos(y[0]) / (length**2 / 3)]
+
+    sol = solve_ivp(rhs, (0, t_end), [0.0, 0.0], method="DOP853", rtol=1e-13, atol=1e-13)
+    return sol.y[0, -1]
+
+
+def test_pendulum_second_order_and_bounded_drift():
+    scene = Pendulum()
+    params = scene.resolve_params()
+    mech = scene.build(params)
+    s0 = scene.initial_state(params, mech)
+    theta_ref = _pendulum_reference(1.0)
+    steps = np.array([4e-3, 2e-3, 1e-3])
+    errors, drift = [], []
+    for h in steps:
+        tr = simulate(mech, s0, 1.0, dt=h, n_save=11)
+        assert tr.ok
+        errors.append(abs(float(tr.q[-1, 2]) - theta_ref))
+        drift.append(max(float(jnp.max(jnp.abs(mech.constraints(q, 0.0)))) for q in tr.q))
+    order = np.polyfit(np.log(steps), np.log(errors), 1)[0]
+    assert 1.8 < order < 2.2, (order, errors)
+    # Index-3: the constraints hold to the Newton tolerance at every step, whatever h.
+    assert max(drift) < 1e-9
+
+
+def test_hertz_impact_closed_form():
+    scene = Impact(damping="none")
+    params = scene.resolve_params({"mass": 0.5, "impact_speed": 0.8, "stiffness": 2e10})
+    mech = scene.build(params)
+    s0 = scene.initial_state(params, mech)
+    from jaxdeploy.scenes import hertz_impact_closed_form
+
+    d_max, f_max, t_c = hertz_impact_closed_form(0.5, 2e10, 0.8)
+    t_hit = scene.time_of_first_touch(params)
+    ts = np.linspace(t_hit - 0.1 * t_c, t_hit + 1.2 * t_c, 3001)
+    tr = simulate(mech, s0, ts[-1], ts=ts, rtol=1e-9, atol=1e-15, dt_max=t_c / 300)
+    assert tr.ok
+    pen = np.asarray(tr.q[:, 0]) - params["clearance"]
+    np.testing.assert_allclose(pen.max(), d_max, rtol=1e-3)
+    np.testing.assert_allclose(2e10 * pen.max() ** 1.5, f_max, rtol=1e-3)
+    # Contact start and end by linear interpolation of the penetration's zero crossings.
+    idx = np.flatnonzero(np.diff(np.sign(pen)) != 0)
+    crossings = [ts[i] - pen[i] * (ts[i + 1] - ts[i]) / (pen[i + 1] - pen[i]) for i in idx]
+    assert len(crossings) == 2
+    np.testing.assert_allclose(crossings[1] - crossings[0], t_c, rtol=1e-3)
+    # Undamped: the rebound speed equals the approach speed.
+    np.testing.assert_allclose(-float(tr.v[-1, 0]), 0.8, rtol=1e-4)
+
+
+def test_impact_energy_error_shrinks_with_step():
+    scene = Impact(damping="none")
+    params = scene.resolve_params()
+    mech = scene.build(params)
+    s0 = scene.initial_state(params, mech)
+    errors = []
+    for h in [2e-6, 1e-6, 5e-7]:
+        tr = simulate(mech, s0, 6e-4, dt=h, n_save=2)  # contact ends at ~4.2e-4 s
+        e0, e1 = (float(mech.kinetic_energy(v)) for v in tr.v)
+        errors.append(abs(e1 / e0 - 1.0))
+    assert errors[0] > errors[1] > errors[2]
+    assert errors[-1] < 1e-3
+
+
+def test_ideal_slider_crank_acceleration_extremes():
+    scene = SliderCrank(ideal=True)
+    params = scene.resolve_params()
+    mech = scene.build(params)
+    s0 = scene.initial_state(params, mech)
+    period = 2 * np.pi / params["crank_speed"]
+    ts = np.linspace(period, 2 * period, 1441)
+    tr = simulate(mech, s0, 2 * period, ts=ts, dt=period / 1440)
+    assert tr.ok
+    _, _, a_ideal = ideal_slider_kinematics(
+        params["crank_length"], params["rod_length"], params["crank_speed"], ts
+    )
+    acc = np.asarray(tr.qdd[:, 6])
+    np.testing.assert_allclose(acc.min(), a_ideal.min(), rtol=1e-3)
+    np.testing.assert_allclose(acc.max(), a_ideal.max(), rtol=1e-3)
+
+
+def test_gradient_through_solver_matches_finite_differences():
+    """d(position after a damped impact)/d(restitution, stiffness), reverse mode through the
+    generalized-α steps (implicit-function-theorem Newton), against central differences."""
+    scene = Impact(damping="lankarani_nikravesh")
+    base = scene.resolve_params({"impact_speed": 0.5, "clearance": 2e-5})
+    t_end = 2e-4
+
+    def final_x(restitution, stiffness):
+        params = dict(base, restitution=restitution, stiffness=stiffness)
+        mech = scene.build(params)
+        s0 = scene.initial_state(params, mech)
+        tr = simulate(mech, s0, t_end, dt=2e-7, n_save=2)
+        return tr.q[-1, 0]
+
+    args = (jnp.asarray(0.7), jnp.asarray(1e10))
+    grads = jax.grad(final_x, argnums=(0, 1))(*args)
+    for i, rel in enumerate([1e-4, 1e-4]):
+        step = rel * float(args[i])
+        plus = list(args)
+        minus = list(args)
+        plus[i] = args[i] + step
+        minus[i] = args[i] - step
+        fd = (final_x(*plus) - final_x(*minus)) / (2 * step)
+        assert np.isfinite(float(grads[i]))
+        np.testing.assert_allclose(float(grads[i]), float(fd), rtol=1e-4)
