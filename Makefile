@@ -11,7 +11,7 @@ $(BIN)/activate: pyproject.toml
 
 .PHONY: demo test lint
 demo: $(BIN)/activate
-	$(BIN)/jaxdeploy simulate --out results/demo
+	$(BIN)/jaxdeploy simulate --out results/demo --overwrite
 
 test: $(BIN)/activate
 	$(BIN)/ruff check .
