@@ -169,3 +169,34 @@ def test_restitution_validation(bad):
 def test_alpha_validation():
     with pytest.raises(ValueError, match=r"alpha = -1\.0 s/m is invalid"):
         HuntCrossleyMaterial(HertzElastic(K), -1.0)
+
+
+def _closed_form_restitution(chi):
+    """Energy form: with u = U(δ)/(m v⁻²) and w = δ'/v⁻, w dw/du = −(1 + χ w) for *any*
+    monotone elastic law, so e solves −e/χ − ln(1 − χe)/χ² = 1/χ − ln(1 + χ)/χ² (χe < 1)."""
+    from scipy.optimize import brentq
+
+    target = 1 / chi - np.log1p(chi) / chi**2
+    return brentq(lambda e: -e / chi - np.log1p(-chi * e) / chi**2 - target, 1e-9, 1 / chi - 1e-12)
+
+
+@pytest.mark.parametrize("sigma", [0.0, 2e-6])
+def test_restitution_is_independent_of_the_elastic_law(sigma):
+    # The rough law changes the force history but not the restitution (closed form above).
+    law = Flores(RoughElastic(K, sigma), 0.6)
+    jitted = jax.jit(lambda d, r, v: law.force(d, r, v))
+
+    def rhs(_, y):
+        return [y[1], -float(jitted(y[0], y[1], 0.3)) / 0.5]
+
+    onset = float(law.elastic.onset_penetration()) - 3 * sigma
+
+    def leave(_, y):
+        return y[0] - onset
+
+    leave.terminal, leave.direction = True, -1
+    sol = solve_ivp(
+        rhs, (0, 1e-2), [onset, 0.3], events=leave, rtol=1e-10, atol=1e-15, method="LSODA"
+    )
+    e_eff = -sol.y_events[0][0][1] / 0.3
+    assert e_eff == pytest.approx(_closed_form_restitution(CHI[Flores](0.6)), abs=2e-4)
