@@ -1,0 +1,43 @@
+"""The command line: outputs, refusal of bad input, no silent overwrite."""
+
+import json
+
+import pytest
+
+from jaxdeploy.cli import main
+
+
+def test_simulate_pendulum_writes_outputs(tmp_path):
+    out = tmp_path / "run"
+    code = main(["simulate", "pendulum", "--t-end", "0.2", "--out", str(out), "--quiet"])
+    assert code == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "ok"
+    assert summary["n_steps"] > 0 and summary["wall_time_s"] > 0
+    assert summary["params"]["length"] == 1.0
+    assert "jax" in summary["versions"]
+    assert (out / "trajectory.npz").exists()
+    # The result is not overwritten without --overwrite.
+    assert main(["simulate", "pendulum", "--t-end", "0.2", "--out", str(out), "--quiet"]) == 2
+
+
+def test_unknown_scene_and_parameter_are_refused(tmp_path, capsys):
+    assert main(["simulate", "trebuchet", "--out", str(tmp_path / "a")]) == 2
+    assert "unknown scene 'trebuchet'" in capsys.readouterr().err
+    assert main(["simulate", "pendulum", "--set", "lenght=2", "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert "unknown parameter 'lenght'" in err and "length" in err
+
+
+def test_out_of_range_parameter_names_the_range(tmp_path, capsys):
+    code = main(
+        ["simulate", "slider_crank", "--set", "clearance=-1e-4", "--out", str(tmp_path / "c")]
+    )
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "clearance" in err and "-0.0001" in err and "(0, 0.1]" in err
+
+
+def test_set_requires_name_equals_value(tmp_path):
+    with pytest.raises(SystemExit, match="NAME=VALUE"):
+        main(["simulate", "pendulum", "--set", "length", "--out", str(tmp_path / "d")])
