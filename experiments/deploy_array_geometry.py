@@ -11,7 +11,7 @@ Run from the repository root::
 
 It prints a table of every number and writes
 
-* ``experiments/deploy_array_geometry.json``  (machine-readable scene definition),
+* ``jaxdeploy/scenes/data/deploy_array_geometry.json``  (machine-readable scene definition),
 * ``docs/figures/deploy_array_geometry_poses.png``         (mechanism at 45, 60, 75, 90 deg),
 * ``docs/figures/deploy_array_geometry_conditioning.png``  (singular values, transmission angles),
 * ``docs/figures/deploy_array_geometry_deployment.png``    (1-DOF deployment alpha(t)).
@@ -47,7 +47,7 @@ from scipy.integrate import solve_ivp  # noqa: E402
 from scipy.interpolate import CubicSpline  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-JSON_PATH = ROOT / "experiments" / "deploy_array_geometry.json"
+JSON_PATH = ROOT / "jaxdeploy" / "scenes" / "data" / "deploy_array_geometry.json"
 FIG_DIR = ROOT / "docs" / "figures"
 
 DEG = np.pi / 180.0

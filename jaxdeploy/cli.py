@@ -7,7 +7,7 @@ import json
 import sys
 import time
 
-DEFAULT_SCENE = "slider_crank"
+DEFAULT_SCENE = "deploy_array"
 
 
 def _parse_assignments(items: list[str]) -> dict[str, float]:

@@ -1,6 +1,7 @@
 """Ready-made mechanisms with default parameters, initial states and outputs."""
 
 from .base import ParamSpec, Scene
+from .deploy_array import DeployArray
 from .impact import Impact, hertz_impact_closed_form
 from .pendulum import Pendulum
 from .slider_crank import SliderCrank, ideal_slider_kinematics
@@ -9,6 +10,7 @@ SCENES = {
     "pendulum": Pendulum,
     "impact": Impact,
     "slider_crank": SliderCrank,
+    "deploy_array": DeployArray,
 }
 
 
@@ -21,6 +23,7 @@ def get_scene(name: str, **options) -> Scene:
 
 __all__ = [
     "SCENES",
+    "DeployArray",
     "Impact",
     "ParamSpec",
     "Pendulum",

@@ -1,0 +1,201 @@
+"""Outputs of a deploy_array run, as in the seed study (W24 §4): deployment angle and its
+deviation from the ideal-joint mechanism, X/Y displacement deviations of each panel's centre
+and tip, panel accelerations and their spectra (unfolding and post-lock phases separately),
+contact forces, lock time."""
+
+from __future__ import annotations
+
+import functools
+import os
+
+import numpy as np
+
+from .contact_forces import clearance_joint_history
+from .spectra import amplitude_spectrum, peak_frequency
+
+PANELS = ("panel1", "panel2")
+
+
+def panel_points(mechanism, q):
+    """Global (x, y) of each panel's centre and tip, arrays (N, 2)."""
+    out = {}
+    for panel in PANELS:
+        k = mechanism.body_index(panel)
+        xy, theta = q[:, 3 * k : 3 * k + 2], q[:, 3 * k + 2]
+        tip = np.asarray(mechanism.point(panel, "tip"))
+        rot = np.stack(
+            [
+                np.cos(theta) * tip[0] - np.sin(theta) * tip[1],
+                np.sin(theta) * tip[0] + np.cos(theta) * tip[1],
+            ],
+            axis=-1,
+        )
+        out[f"{panel}_centre"] = xy
+        out[f"{panel}_tip"] = xy + rot
+    return out
+
+
+def lock_time(ts, alpha, lock_angle):
+    """First time α reaches the lock angle (linear interpolation between saved states)."""
+    above = np.flatnonzero(alpha >= lock_angle)
+    if len(above) == 0 or above[0] == 0:
+        return float("nan")
+    i = above[0]
+    frac = (lock_angle - alpha[i - 1]) / (alpha[i] - alpha[i - 1])
+    return float(ts[i - 1] + frac * (ts[i] - ts[i - 1]))
+
+
+@functools.lru_cache(maxsize=4)
+def _ideal_reference_cached(ts_key, t_end, control_key, param_key):
+    from ..scenes.deploy_array import DeployArray
+    from ..simulation import simulate
+
+    scene = DeployArray(ideal=True)
+    params = scene.resolve_params({k: v for k, v in param_key if k in scene.params})
+    mech = scene.build(params)
+    tr = simulate(
+        mech, scene.initial_state(params, mech), t_end, ts=np.array(ts_key), **dict(control_key)
+    )
+    return np.asarray(tr.q), np.asarray(tr.qdd), tr.status()
+
+
+def ideal_reference(scene, params, trajectory):
+    """The ideal-joint mechanism's trajectory at the same saved times (cached)."""
+    ts = tuple(np.asarray(trajectory.ts).tolist())
+    shared = tuple(sorted((k, float(v)) for k, v in params.items()))
+    return _ideal_reference_cached(ts, ts[-1], tuple(sorted(scene.default_control.items())), shared)
+
+
+def deploy_array_outputs(scene, params, mechanism, trajectory) -> dict:
+    """Time series of every output (numpy)."""
+    from ..scenes.deploy_array import GEOMETRY, deployment_angle
+
+    ts = np.asarray(trajectory.ts)
+    q, qdd = np.asarray(trajectory.q), np.asarray(trajectory.qdd)
+    q_ideal, qdd_ideal, ideal_status = ideal_reference(scene, params, trajectory)
+    alpha, alpha_ideal = deployment_angle(q), deployment_angle(q_ideal)
+    points, points_ideal = panel_points(mechanism, q), panel_points(mechanism, q_ideal)
+    out = {
+        "t": ts,
+        "alpha": alpha,
+        "alpha_ideal": alpha_ideal,
+        "ideal_status": ideal_status,
+        "lock_time": lock_time(ts, alpha, GEOMETRY["latch"]["engage_alpha"]),
+        "lock_time_ideal": lock_time(ts, alpha_ideal, GEOMETRY["latch"]["engage_alpha"]),
+    }
+    for key in points:
+        out[f"{key}_deviation"] = points[key] - points_ideal[key]
+    for panel in PANELS:
+        k = mechanism.body_index(panel)
+        out[f"{panel}_acceleration"] = qdd[:, 3 * k : 3 * k + 2]
+    out["joints"] = {
+        mechanism.elements[i].journal_body: h
+        for i, h in clearance_joint_history(mechanism, trajectory).items()
+    }
+    return out
+
+
+def deploy_array_summary(scene, params, mechanism, trajectory) -> dict:
+    o = deploy_array_outputs(scene, params, mechanism, trajectory)
+    ts = o["t"]
+    t_lock = o["lock_time"] if np.isfinite(o["lock_time"]) else ts[-1]
+    deploy, locked = ts <= t_lock, ts > t_lock
+    dev = np.abs(o["alpha"] - o["alpha_ideal"])
+    summary = {
+        "lock_time": o["lock_time"],
+        "lock_time_ideal": o["lock_time_ideal"],
+        "max_angle_deviation_deploy": float(dev[deploy].max()),
+        "max_angle_deviation_locked": float(dev[locked].max()) if locked.any() else 0.0,
+    }
+    for panel in PANELS:
+        d = np.abs(o[f"{panel}_centre_deviation"])
+        summary[f"{panel}_max_dx"] = float(d[:, 0].max())
+        summary[f"{panel}_max_dy"] = float(d[:, 1].max())
+        tip = np.abs(o[f"{panel}_tip_deviation"])
+        summary[f"{panel}_tip_max_dx"] = float(tip[:, 0].max())
+        summary[f"{panel}_tip_max_dy"] = float(tip[:, 1].max())
+        acc_y = o[f"{panel}_acceleration"][:, 1]
+        summary[f"{panel}_peak_freq_hz"] = (
+            peak_frequency(ts[locked], acc_y[locked]) if locked.sum() > 8 else float("nan")
+        )
+    forces = [np.asarray(h["normal_force"]) for h in o["joints"].values()]
+    summary["max_contact_force"] = float(max(f.max() for f in forces)) if forces else 0.0
+    summary["ideal_reference_status"] = o["ideal_status"]
+    return summary
+
+
+def plot_deploy_array(scene, params, mechanism, trajectory, out_dir) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    o = deploy_array_outputs(scene, params, mechanism, trajectory)
+    ts = o["t"]
+    t_lock = o["lock_time"] if np.isfinite(o["lock_time"]) else ts[-1]
+    files = []
+
+    def save(fig, name):
+        fig.tight_layout()
+        path = os.path.join(out_dir, name)
+        fig.savefig(path, dpi=130)
+        plt.close(fig)
+        files.append(path)
+
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    ax1.plot(ts, np.degrees(o["alpha"]), label="clearance joints")
+    ax1.plot(ts, np.degrees(o["alpha_ideal"]), "k--", lw=1, label="ideal joints")
+    ax1.set_ylabel("deployment angle α [deg]")
+    ax1.legend()
+    ax2.plot(ts, np.degrees(o["alpha"] - o["alpha_ideal"]), lw=0.8)
+    ax2.axvline(t_lock, color="grey", ls=":", label="lock")
+    ax2.set_ylabel("α − α_ideal [deg]")
+    ax2.set_xlabel("time [s]")
+    for ax in (ax1, ax2):
+        ax.grid(alpha=0.3)
+    save(fig, "deployment_angle.png")
+
+    fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
+    for row, panel in enumerate(PANELS):
+        for col, axis_name in enumerate("XY"):
+            ax = axes[row, col]
+            for where, style in (("centre", "-"), ("tip", "--")):
+                d = o[f"{panel}_{where}_deviation"][:, col] * 1e6
+                ax.plot(ts, d, style, lw=0.7, label=where)
+            ax.set_title(f"{panel}: {axis_name} displacement deviation")
+            ax.set_ylabel("µm")
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8)
+    for ax in axes[-1]:
+        ax.set_xlabel("time [s]")
+    save(fig, "panel_displacement_deviation.png")
+
+    fig, axes = plt.subplots(2, 2, figsize=(10, 6))
+    for row, panel in enumerate(PANELS):
+        acc_y = o[f"{panel}_acceleration"][:, 1]
+        axes[row, 0].plot(ts, acc_y, lw=0.5)
+        axes[row, 0].set_title(f"{panel}: Y acceleration of the centre")
+        axes[row, 0].set_ylabel("m/s²")
+        axes[row, 0].set_xlabel("time [s]")
+        for phase, mask in (("unfolding", ts <= t_lock), ("post-lock", ts > t_lock)):
+            if mask.sum() > 8:
+                f, a = amplitude_spectrum(ts[mask], acc_y[mask])
+                axes[row, 1].semilogy(f, a + 1e-12, lw=0.7, label=phase)
+        axes[row, 1].set_xlim(0, 500)
+        axes[row, 1].set_title(f"{panel}: amplitude spectrum")
+        axes[row, 1].set_xlabel("frequency [Hz]")
+        axes[row, 1].legend(fontsize=8)
+    save(fig, "panel_acceleration_spectra.png")
+
+    if o["joints"]:
+        fig, axes = plt.subplots(
+            len(o["joints"]), 1, figsize=(7, 2.6 * len(o["joints"])), squeeze=False
+        )
+        for ax, (owner, h) in zip(axes[:, 0], o["joints"].items(), strict=True):
+            ax.plot(ts, np.asarray(h["normal_force"]), lw=0.6)
+            ax.set_title(f"{owner} hinge: normal contact force")
+            ax.set_ylabel("N")
+            ax.grid(alpha=0.3)
+        axes[-1, 0].set_xlabel("time [s]")
+        save(fig, "contact_forces.png")
+    return files

@@ -1,0 +1,206 @@
+"""The deployable solar array of the seed study (W24), reconstructed.
+
+Spacecraft body (ground), panel 1 hinged to it (J1, the root hinge), panel 2 hinged to panel
+1's tip (J7), and five support rods 3–7 closing three loops: 7 moving links, 10 revolute
+joints, 1 degree of freedom with ideal joints. A preloaded coil spring at the root drives the
+deployment angle α (between panel 1 and +y) from 45° at rest to 90°, where a latch engages.
+Geometry, masses, spring and latch come from the design study
+`experiments/deploy_array_geometry.py` (data in `data/deploy_array_geometry.json`, reasons in
+`docs/deploy_array_geometry.md`); the paper's Fig. 8 and Table 2 are missing, so every number
+is ours.
+
+Clearance joints: by default J1 (owned by panel 1) and J7 (owned by panel 2), each with its own
+roughness Ra and clearance c (`panel1_ra`, `panel1_clearance`, …); any hinge can be made a
+clearance joint with `DeployArray(clearance_joints={"J3": "rod3", ...})`, which adds the
+parameters `rod3_ra`, `rod3_clearance`. Contact: rough (GW-averaged) Hertz law for steel pins
+of 5 mm radius, Lankarani–Nikravesh damping, smooth Coulomb friction.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from importlib import resources
+
+import jax.numpy as jnp
+
+from .. import contact
+from ..mechanism import (
+    Body,
+    CoilSpringDrive,
+    Latch,
+    Mechanism,
+    Revolute,
+    RevoluteClearance,
+    consistent_state,
+)
+from ._contact import clearance_contact_laws
+from .base import ParamSpec, Scene
+
+INF = math.inf
+
+
+def load_geometry() -> dict:
+    """The design study's geometry and defaults (see `docs/deploy_array_geometry.md`)."""
+    text = resources.files(__package__).joinpath("data/deploy_array_geometry.json").read_text()
+    return json.loads(text)
+
+
+GEOMETRY = load_geometry()
+JOINTS = {j["name"]: j for j in GEOMETRY["joints"]}
+DEFAULT_CLEARANCE_JOINTS = dict(GEOMETRY["contact_defaults"]["clearance_joints"])
+# α = θ_ground − θ_panel1 − offset = π/2 − θ_panel1 (DeployArray's deployment angle).
+ANGLE_OFFSET = -math.pi / 2
+
+
+def _shared_params() -> dict[str, ParamSpec]:
+    g = GEOMETRY
+    return {
+        "spring_stiffness": ParamSpec(
+            g["coil_spring"]["k"], 0, INF, "N m/rad", "root coil spring k"
+        ),
+        "spring_free_angle": ParamSpec(
+            g["coil_spring"]["alpha0"], 0, 2 * math.pi, "rad", "spring free angle α0"
+        ),
+        "latch_stiffness": ParamSpec(
+            g["latch"]["k_latch"], 0, INF, "N m/rad", "latch stiffness k_L", False
+        ),
+        "latch_damping": ParamSpec(g["latch"]["c_latch"], 0, INF, "N m s/rad", "latch damping"),
+        "youngs_modulus": ParamSpec(
+            g["contact_defaults"]["material"]["E"], 1e6, 1e13, "Pa", "pin/bearing modulus"
+        ),
+        "poisson_ratio": ParamSpec(
+            g["contact_defaults"]["material"]["nu"], -0.999, 0.499, "", "Poisson's ratio"
+        ),
+        "restitution": ParamSpec(0.9, 0, 1, "", "coefficient of restitution c_e", False),
+        "friction_coefficient": ParamSpec(0.05, 0, 2, "", "friction μ (0: none traced)"),
+        "roughness_offset": ParamSpec(0.0, 0, 6, "σ", "clearance reference offset s0"),
+        "pin_radius": ParamSpec(
+            g["contact_defaults"]["pin_radius"], 0, INF, "m", "hinge pin radius R_j", False
+        ),
+    }
+
+
+class DeployArray(Scene):
+    """Two-panel deployable array with clearance joints (see module docstring).
+
+    **Arguments:**
+    - `clearance_joints`: `{joint name: owner}`; default `{"J1": "panel1", "J7": "panel2"}`.
+    - `ideal`: all joints ideal (the reference mechanism).
+    - `normal_law`: damping law for the clearance joints (default Lankarani–Nikravesh).
+    """
+
+    name = "deploy_array"
+    default_t_end = 2.0
+    default_control = {"rtol": 1e-6, "atol": 1e-9, "dt_max": 5e-4}
+
+    def __init__(
+        self,
+        clearance_joints: dict[str, str] | None = None,
+        ideal: bool = False,
+        normal_law: str = "lankarani_nikravesh",
+    ):
+        joints = DEFAULT_CLEARANCE_JOINTS if clearance_joints is None else clearance_joints
+        for name in joints:
+            if name not in JOINTS:
+                raise ValueError(
+                    f"unknown joint {name!r} in clearance_joints; valid: {', '.join(JOINTS)}"
+                )
+        self.clearance_joints = {} if ideal else dict(joints)
+        self.ideal = ideal
+        self.normal_law = normal_law
+        params = _shared_params()
+        ra = GEOMETRY["contact_defaults"]["Ra"]
+        c = GEOMETRY["contact_defaults"]["clearance"]
+        for owner in self.clearance_joints.values():
+            params[f"{owner}_ra"] = ParamSpec(ra, 0, 1e-4, "m", f"{owner} hinge roughness Ra")
+            params[f"{owner}_clearance"] = ParamSpec(
+                c, 0, 1e-2, "m", f"{owner} hinge radial clearance", False
+            )
+        self.params = params
+
+    def check_params(self, params):
+        return None
+
+    def build(self, params):
+        p = params
+        bodies = [
+            Body(
+                name,
+                GEOMETRY["bodies"][name]["mass"],
+                GEOMETRY["bodies"][name]["inertia"],
+                GEOMETRY["bodies"][name]["points"],
+            )
+            for name in GEOMETRY["body_order"]
+        ]
+        elements = []
+        for name, joint in JOINTS.items():
+            ends = (joint["body_i"], joint["point_i"], joint["body_j"], joint["point_j"])
+            owner = self.clearance_joints.get(name)
+            if owner is None:
+                elements.append(Revolute(*ends))
+                continue
+            clearance = p[f"{owner}_clearance"]
+            normal, friction = clearance_contact_laws(
+                journal_radius=p["pin_radius"],
+                clearance=clearance,
+                youngs_modulus=p["youngs_modulus"],
+                poisson_ratio=p["poisson_ratio"],
+                sigma=contact.ra_to_sigma(p[f"{owner}_ra"]),
+                restitution=p["restitution"],
+                friction_coefficient=p["friction_coefficient"],
+                normal_law=self.normal_law,
+                roughness_offset=p["roughness_offset"],
+            )
+            elements.append(
+                RevoluteClearance(
+                    *ends,
+                    clearance=clearance,
+                    journal_radius=p["pin_radius"],
+                    normal=normal,
+                    friction=friction,
+                )
+            )
+        elements.append(
+            CoilSpringDrive(
+                "panel1",
+                "ground",
+                stiffness=p["spring_stiffness"],
+                free_angle=p["spring_free_angle"],
+                angle_offset=ANGLE_OFFSET,
+            )
+        )
+        elements.append(
+            Latch(
+                "panel1",
+                "ground",
+                lock_angle=GEOMETRY["latch"]["engage_alpha"],
+                stiffness=p["latch_stiffness"],
+                damping=p["latch_damping"],
+                angle_offset=ANGLE_OFFSET,
+            )
+        )
+        return Mechanism(bodies, elements, ground_points=GEOMETRY["bodies"]["ground"]["points"])
+
+    def initial_state(self, params, mechanism):
+        """Half deployed (α = 45°), at rest; journals centred (the ideal pose)."""
+        q_guess = jnp.asarray(GEOMETRY["initial_state"]["q"], dtype=float)
+        ideal = consistent_state(mechanism.idealized(), q_guess, fixed=(2,))
+        if not self.clearance_joints:
+            return ideal
+        return consistent_state(mechanism, ideal.q, ideal.v)
+
+    def summary(self, params, mechanism, trajectory):
+        from ..analysis.deploy_array import deploy_array_summary
+
+        return deploy_array_summary(self, params, mechanism, trajectory)
+
+    def plot(self, params, mechanism, trajectory, out_dir):
+        from ..analysis.deploy_array import plot_deploy_array
+
+        return plot_deploy_array(self, params, mechanism, trajectory, out_dir)
+
+
+def deployment_angle(q):
+    """α = π/2 − θ_panel1 (panel 1 is the first body)."""
+    return 0.5 * math.pi - q[..., 2]
