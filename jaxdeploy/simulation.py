@@ -79,7 +79,7 @@ class Trajectory(eqx.Module):
         ts = np.asarray(self.ts)
         finite = np.isfinite(ts) & np.all(np.isfinite(np.asarray(self.q)), axis=-1)
         t_reached = float(ts[finite].max()) if finite.any() else float("nan")
-        return f"failed after t = {t_reached:.6g} s: {self.result.error_message()}"
+        return f"failed after t = {t_reached:.6g} s: {dfx.RESULTS[self.result]}"
 
 
 def _save_times(t0, t_end, n_save, ts):

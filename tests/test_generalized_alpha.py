@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from jaxdeploy.mechanism import Body, Mechanism, Spring
+from jaxdeploy.mechanism import Body, Mechanism, Spring, consistent_state
 from jaxdeploy.scenes import Impact, Pendulum, SliderCrank, ideal_slider_kinematics
 from jaxdeploy.simulation import simulate
 from jaxdeploy.solvers import GeneralizedAlpha, MechanismState, MechanismTerm, chung_hulbert
@@ -164,3 +164,15 @@ def test_gradient_through_solver_matches_finite_differences():
         fd = (final_x(*plus) - final_x(*minus)) / (2 * step)
         assert np.isfinite(float(grads[i]))
         np.testing.assert_allclose(float(grads[i]), float(fd), rtol=1e-4)
+
+
+def test_newton_failure_is_reported_with_time_and_reason_not_nan():
+    mech = _oscillator(omega=1e4)
+    s0 = consistent_state(mech, jnp.array([1.0, 0.0, 0.0]))
+    ok = simulate(mech, s0, 5.0, dt=1.0, n_save=6, solver=GeneralizedAlpha(rho_inf=0.6))
+    assert ok.ok and ok.status() == "ok"
+    starved = GeneralizedAlpha(rho_inf=0.6, newton_max_iterations=1)
+    failed = simulate(mech, s0, 5.0, dt=1.0, n_save=6, solver=starved)
+    assert not failed.ok
+    assert failed.status().startswith("failed after t = ")
+    assert "Nonlinear solve diverged" in failed.status()

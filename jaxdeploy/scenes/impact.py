@@ -38,7 +38,7 @@ class Impact(Scene):
         "restitution": ParamSpec(0.9, 0, 1, "", "coefficient of restitution", False),
         "material_damping": ParamSpec(0.0, 0, INF, "s/m", "α of the memoryless law"),
     }
-    default_t_end = 3e-4
+    default_t_end = 6e-4  # first touch at c/v0 = 1e-4 s; Hertz contact lasts ~3.2e-4 s
     default_control = {"rtol": 1e-8, "atol": 1e-13, "dt_max": 1e-6}
 
     def __init__(self, damping: str = "none"):

@@ -159,7 +159,10 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
                 dz = _flat_solve(lambda x: jax.jvp(f, (z,), (x,))[1], f(z))
                 z = jax.tree_util.tree_map(lambda a, b: a - b, z, dz)
                 du = dz[0]
-                scale = self.newton_atol + self.newton_rtol * jnp.abs(q_hat + z[0])
+                # Relative to the larger of predictor and iterate: when the correction cancels
+                # the predictor (large h ω), roundoff in u is ε|q̂|, not ε|q|.
+                magnitude = jnp.maximum(jnp.abs(q_hat), jnp.abs(q_hat + z[0]))
+                scale = self.newton_atol + self.newton_rtol * magnitude
                 converged = jnp.all(jnp.abs(du) <= scale)
                 ok = jnp.all(jnp.isfinite(du))
                 return z, it + 1, converged, ok
