@@ -119,9 +119,6 @@ class DeployArray(Scene):
             )
         self.params = params
 
-    def check_params(self, params):
-        return None
-
     def build(self, params):
         p = params
         bodies = [

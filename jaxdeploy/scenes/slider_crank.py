@@ -130,7 +130,7 @@ class SliderCrank(Scene):
         )
         ideal = mechanism.idealized()
         state = consistent_state(ideal, q_guess)
-        if ideal is mechanism or mechanism.n_constraints == ideal.n_constraints:
+        if mechanism.n_constraints == ideal.n_constraints:  # already ideal
             return state
         return consistent_state(mechanism, state.q, state.v)
 
