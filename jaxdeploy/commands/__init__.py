@@ -1,0 +1,24 @@
+"""Subcommands of the `jaxdeploy` command line, one module each.
+
+A module here is a subcommand when it defines `NAME` (the word typed), `HELP` (one line),
+`add_arguments(parser)` and `run(args) -> int` (the exit code). Modules are found at start-up,
+so adding a command means adding a module; keep heavy imports (jax, the solvers) inside `run`
+so that `jaxdeploy --help` stays instant.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+
+
+def discover() -> list:
+    """The command modules, sorted by name."""
+    modules = []
+    for info in pkgutil.iter_modules(__path__):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"{__name__}.{info.name}")
+        if all(hasattr(module, a) for a in ("NAME", "HELP", "add_arguments", "run")):
+            modules.append(module)
+    return sorted(modules, key=lambda m: m.NAME)

@@ -1,0 +1,109 @@
+"""`jaxdeploy simulate [SCENE] [--set NAME=VALUE ...] [--t-end T] [--out DIR]`: run a scene and
+write its trajectory, plots and summary."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+NAME = "simulate"
+HELP = "run a scene and write trajectory, plots, summary"
+DEFAULT_SCENE = "deploy_array"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("scene", nargs="?", help=f"scene name (default {DEFAULT_SCENE})")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    parser.add_argument("--t-end", type=float, default=None, help="end time [s]")
+    parser.add_argument("--out", default=None, help="output folder (default results/SCENE)")
+    parser.add_argument("--n-save", type=int, default=2001, help="number of saved states")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing result")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def parse_assignments(items: list[str]) -> dict[str, float]:
+    out = {}
+    for item in items:
+        if "=" not in item:
+            raise SystemExit(f"error: --set expects NAME=VALUE, got {item!r}")
+        name, value = item.split("=", 1)
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise SystemExit(f"error: --set {name}: {value!r} is not a number (SI units)") from None
+    return out
+
+
+def run(args) -> int:
+    from ..io import atomic_write_json, atomic_write_npz, prepare_output_dir, run_metadata
+    from ..scenes import SCENES, get_scene
+    from ..simulation import simulate
+
+    scene_name = args.scene or DEFAULT_SCENE
+    if scene_name not in SCENES:
+        print(
+            f"error: unknown scene {scene_name!r}; valid: {', '.join(sorted(SCENES))}",
+            file=sys.stderr,
+        )
+        return 2
+    scene = get_scene(scene_name)
+    try:
+        params = scene.resolve_params(parse_assignments(args.set))
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    out = args.out or f"results/{scene_name}"
+    try:
+        prepare_output_dir(out, args.overwrite)
+    except FileExistsError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    t_end = scene.default_t_end if args.t_end is None else args.t_end
+    if not t_end > 0:
+        print(f"error: --t-end = {t_end} is invalid: it must be > 0 (s)", file=sys.stderr)
+        return 2
+
+    mechanism = scene.build(params)
+    initial = scene.initial_state(params, mechanism)
+    control = dict(scene.default_control)
+    start = time.perf_counter()
+    trajectory = simulate(
+        mechanism,
+        initial,
+        t_end,
+        n_save=args.n_save,
+        progress=not args.quiet and sys.stderr.isatty(),
+        **control,
+    )
+    trajectory.q.block_until_ready()
+    wall = time.perf_counter() - start
+
+    summary = {
+        "scene": scene_name,
+        "t_end": t_end,
+        "status": trajectory.status(),
+        "n_steps": int(trajectory.stats["num_accepted_steps"]),
+        "n_rejected": int(trajectory.stats["num_rejected_steps"]),
+        "n_newton_iterations": int(trajectory.stats.get("num_newton_iterations", -1)),
+        "wall_time_s": wall,
+        "wall_time_includes": "compilation and run",
+    }
+    summary.update(scene.summary(params, mechanism, trajectory))
+    summary["params"] = params
+    summary["step_control"] = control
+    summary["versions"] = run_metadata()
+    atomic_write_npz(
+        f"{out}/trajectory.npz",
+        t=trajectory.ts,
+        q=trajectory.q,
+        v=trajectory.v,
+        qdd=trajectory.qdd,
+        lam=trajectory.lam,
+    )
+    figures = scene.plot(params, mechanism, trajectory, out)
+    atomic_write_json(f"{out}/summary.json", summary)
+    shown = {k: v for k, v in summary.items() if k not in ("params", "versions", "step_control")}
+    print(json.dumps(shown, indent=2, default=float))
+    print(f"wrote {out}/summary.json, {out}/trajectory.npz" + "".join(f", {f}" for f in figures))
+    return 0 if trajectory.ok else 1
