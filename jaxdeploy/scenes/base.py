@@ -82,6 +82,21 @@ class Scene(abc.ABC):
     def initial_state(self, params: Mapping, mechanism: Mechanism) -> ConsistentState:
         """A consistent initial state."""
 
+    def channels(self, mechanism: Mechanism, trajectory) -> dict:
+        """Named output signals of one trajectory, each an array `(N,)` over the saved times.
+
+        Pure JAX, so losses and objectives built on them differentiate and vmap. The base set
+        is every body's coordinates and accelerations, `{body}_x`, `{body}_y`, `{body}_theta`
+        and `{body}_ax`, `{body}_ay`, `{body}_atheta` (SI units); scenes add their own
+        quantities (e.g. `deploy_array`'s deployment angle `alpha`).
+        """
+        out = {}
+        for k, body in enumerate(mechanism.bodies):
+            for j, coordinate in enumerate(("x", "y", "theta")):
+                out[f"{body.name}_{coordinate}"] = trajectory.q[:, 3 * k + j]
+                out[f"{body.name}_a{coordinate}"] = trajectory.qdd[:, 3 * k + j]
+        return out
+
     def summary(self, params, mechanism, trajectory) -> dict:
         return {}
 

@@ -187,6 +187,37 @@ class DeployArray(Scene):
             return ideal
         return consistent_state(mechanism, ideal.q, ideal.v)
 
+    def channels(self, mechanism, trajectory):
+        """Base channels plus `alpha` (deployment angle, rad); each panel's tip position
+        `{panel}_tip_x/_y` and acceleration `{panel}_tip_ax/_ay`; and per clearance joint
+        (named by owner) `{owner}_normal_force` [N] and `{owner}_penetration` [m].
+
+        Tip acceleration of a point s fixed in a body (Nikravesh 1988, eq. 4.12):
+        a_P = r̈ + θ̈ A′s − θ̇² A s, with A the rotation matrix and A′s = perp(A s).
+        """
+        from ..analysis.contact_forces import clearance_joint_history
+
+        out = super().channels(mechanism, trajectory)
+        q, v, qdd = trajectory.q, trajectory.v, trajectory.qdd
+        out["alpha"] = deployment_angle(q)
+        for panel in ("panel1", "panel2"):
+            k = mechanism.body_index(panel)
+            tip = mechanism.point(panel, "tip")
+            theta, omega, omega_dot = q[:, 3 * k + 2], v[:, 3 * k + 2], qdd[:, 3 * k + 2]
+            c, s = jnp.cos(theta), jnp.sin(theta)
+            arm_x = c * tip[0] - s * tip[1]
+            arm_y = s * tip[0] + c * tip[1]
+            out[f"{panel}_tip_x"] = q[:, 3 * k] + arm_x
+            out[f"{panel}_tip_y"] = q[:, 3 * k + 1] + arm_y
+            out[f"{panel}_tip_ax"] = qdd[:, 3 * k] - omega_dot * arm_y - omega**2 * arm_x
+            out[f"{panel}_tip_ay"] = qdd[:, 3 * k + 1] + omega_dot * arm_x - omega**2 * arm_y
+        joint_names = list(JOINTS)  # build() appends one element per joint, in this order
+        for index, history in clearance_joint_history(mechanism, trajectory).items():
+            owner = self.clearance_joints[joint_names[index]]
+            out[f"{owner}_normal_force"] = history["normal_force"]
+            out[f"{owner}_penetration"] = history["penetration"]
+        return out
+
     def summary(self, params, mechanism, trajectory):
         from ..analysis.deploy_array import deploy_array_summary
 
