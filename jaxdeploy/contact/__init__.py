@@ -45,6 +45,7 @@ from .stiffness import (
     effective_modulus,
     effective_radius,
     journal_bearing_stiffness,
+    radial_clearance,
 )
 
 __all__ = [
@@ -77,4 +78,5 @@ __all__ = [
     "effective_modulus",
     "effective_radius",
     "journal_bearing_stiffness",
+    "radial_clearance",
 ]

@@ -19,9 +19,14 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from .._validation import check_positive, check_range
+from .._validation import check_positive, check_range, is_concrete
 
-__all__ = ["effective_modulus", "journal_bearing_stiffness", "effective_radius"]
+__all__ = [
+    "effective_modulus",
+    "journal_bearing_stiffness",
+    "effective_radius",
+    "radial_clearance",
+]
 
 
 def _check_material(name: str, modulus, poisson):
@@ -45,6 +50,29 @@ def effective_modulus(E_journal, nu_journal, E_bearing, nu_bearing):
     _check_material("bearing", E_bearing, nu_bearing)
     compliance = (1.0 - nu_journal**2) / E_journal + (1.0 - nu_bearing**2) / E_bearing
     return 1.0 / compliance
+
+
+def radial_clearance(radius_bearing, radius_journal):
+    """Radial clearance `c = R_b − R_j` of a journal (pin) in a bearing (hole), checked.
+
+    **Arguments:** `radius_bearing` `R_b` (m) > 0, `radius_journal` `R_j` (m) > 0, `R_j < R_b`.
+
+    **Returns:** `c` (m). Raises `ValueError` naming both radii when the journal does not fit.
+
+    **References:** DESIGN.md §2.2.
+    """
+    check_positive("radius_bearing", radius_bearing, unit="m")
+    check_positive("radius_journal", radius_journal, unit="m")
+    if is_concrete((radius_bearing, radius_journal)):
+        r_b = float(radius_bearing)
+        r_j = float(radius_journal)
+        if not r_j < r_b:
+            raise ValueError(
+                f"radius_journal = {r_j!r} m is invalid: the journal must be smaller than its "
+                f"bearing, i.e. in (0, {r_b!r}) m (radius_bearing = {r_b!r} m); the radial "
+                f"clearance R_b - R_j = {r_b - r_j!r} m must be > 0."
+            )
+    return jnp.asarray(radius_bearing, dtype=float) - jnp.asarray(radius_journal, dtype=float)
 
 
 def effective_radius(radius_journal, clearance):

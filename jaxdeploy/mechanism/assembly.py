@@ -119,6 +119,24 @@ def project_velocities(mechanism: Mechanism, q, v_guess, t=0.0, fixed: Sequence[
     return v_guess - minv * (jac.T @ jnp.linalg.solve(schur, jac @ v_guess - rhs))
 
 
+def _worst_element(mechanism: Mechanism, q, t) -> str:
+    """Which constraint is violated most at `q` (for the error message)."""
+    kin = mechanism.kinematics(q)
+    worst, where = -1.0, "no constraint is violated"
+    for index, element in enumerate(mechanism.elements):
+        if not element.n_constraints:
+            continue
+        violation = float(np.max(np.abs(np.asarray(element.constraint(kin, t)))))
+        if not violation <= worst:  # NaN counts as worst
+            ends = ", ".join(element.bodies())
+            worst = violation if np.isfinite(violation) else np.inf
+            where = (
+                f"largest violation {violation:.3g} in element {index} "
+                f"({type(element).__name__} between {ends})"
+            )
+    return where
+
+
 def _check_rank(mechanism: Mechanism, q, t, fixed, what: str):
     jac = np.asarray(mechanism.constraint_jacobian(q, t))
     if jac.shape[0] == 0:
@@ -167,8 +185,9 @@ def consistent_state(
         if not np.isfinite(float(res)) or float(res) > 1e3 * tol:
             raise AssemblyError(
                 f"could not assemble the initial pose: constraint residual {float(res):.3g} "
-                f"after {int(it)} Gauss–Newton iterations (tolerance {tol:g}); the guess is "
-                "too far from a feasible pose or the geometry cannot close."
+                f"after {int(it)} Gauss–Newton iterations (tolerance {tol:g}); "
+                f"{_worst_element(mechanism, q, t)}. The guess is too far from a feasible "
+                "pose or the geometry cannot close."
             )
         _check_rank(mechanism, q, t, fixed, "initial pose")
     v = project_velocities(mechanism, q, v_guess, t, fixed_velocities)

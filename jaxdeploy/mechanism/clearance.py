@@ -69,7 +69,8 @@ class RevoluteClearance(AbstractElement):
     **Arguments:**
     - `bearing_body`, `bearing_point`: the body with the hole and the hole's centre.
     - `journal_body`, `journal_point`: the body with the pin and the pin's centre.
-    - `clearance`: radial clearance c = R_b − R_j [m] > 0.
+    - `clearance`: radial clearance c = R_b − R_j [m] > 0 (`contact.radial_clearance(R_b, R_j)`
+      computes it from both radii and refuses a journal larger than its bearing).
     - `journal_radius`: pin radius R_j [m] > 0.
     - `normal`: a normal contact law from `jaxdeploy.contact` (e.g. `LankaraniNikravesh`).
     - `friction`: a friction law from `jaxdeploy.contact`, or `None` (frictionless).
@@ -89,6 +90,9 @@ class RevoluteClearance(AbstractElement):
     def __check_init__(self):
         check_positive("clearance", self.clearance, "m")
         check_positive("journal_radius", self.journal_radius, "m")
+        # ε = 0 would make |e| = sqrt(e·e) non-differentiable (NaN gradient) at e = 0, where
+        # every clearance scene starts (journal centred).
+        check_positive("eccentricity_smoothing", self.eccentricity_smoothing, "m")
 
     @property
     def has_memory(self) -> bool:

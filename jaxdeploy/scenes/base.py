@@ -29,6 +29,7 @@ class ParamSpec:
     unit: str = ""
     doc: str = ""
     low_inclusive: bool = True
+    high_inclusive: bool = True
 
 
 def is_exactly_zero(value) -> bool:
@@ -65,6 +66,7 @@ class Scene(abc.ABC):
                 spec.low,
                 spec.high,
                 low_inclusive=spec.low_inclusive,
+                high_inclusive=spec.high_inclusive,
                 unit=spec.unit,
             )
         self.check_params(params)

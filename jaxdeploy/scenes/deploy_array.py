@@ -70,7 +70,7 @@ def _shared_params() -> dict[str, ParamSpec]:
             g["contact_defaults"]["material"]["E"], 1e6, 1e13, "Pa", "pin/bearing modulus"
         ),
         "poisson_ratio": ParamSpec(
-            g["contact_defaults"]["material"]["nu"], -0.999, 0.499, "", "Poisson's ratio"
+            g["contact_defaults"]["material"]["nu"], -1, 0.5, "", "Poisson's ratio", False, False
         ),
         "restitution": ParamSpec(0.9, 0, 1, "", "coefficient of restitution c_e", False),
         "friction_coefficient": ParamSpec(0.05, 0, 2, "", "friction μ (0: none traced)"),

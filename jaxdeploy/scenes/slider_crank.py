@@ -21,6 +21,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
+from .._validation import is_concrete
 from ..mechanism import (
     AngleDriver,
     Body,
@@ -55,7 +56,7 @@ class SliderCrank(Scene):
         "journal_radius": ParamSpec(9.5e-3, 0, INF, "m", "pin radius R_j", False),
         "clearance": ParamSpec(0.5e-3, 0, 0.1, "m", "radial clearance c = R_b − R_j", False),
         "youngs_modulus": ParamSpec(207e9, 1e6, 1e13, "Pa", "Young's modulus (pin and bearing)"),
-        "poisson_ratio": ParamSpec(0.3, -0.999, 0.499, "", "Poisson's ratio"),
+        "poisson_ratio": ParamSpec(0.3, -1, 0.5, "", "Poisson's ratio", False, False),
         "sigma": ParamSpec(0.0, 0, 1e-4, "m", "combined RMS roughness σ (0: smooth, Hertz)"),
         "restitution": ParamSpec(0.9, 0, 1, "", "coefficient of restitution c_e", False),
         "friction_coefficient": ParamSpec(0.0, 0, 2, "", "friction μ (0: no friction traced)"),
@@ -67,6 +68,16 @@ class SliderCrank(Scene):
     def __init__(self, ideal: bool = False, normal_law: str = "lankarani_nikravesh"):
         self.ideal = ideal
         self.normal_law = normal_law
+
+    def check_params(self, params):
+        """The crank must be shorter than the rod, or the mechanism locks before a revolution."""
+        r, ell = params["crank_length"], params["rod_length"]
+        if is_concrete((r, ell)) and not float(r) < float(ell):
+            raise ValueError(
+                f"crank_length = {float(r)!r} m is invalid with rod_length = {float(ell)!r} m: "
+                f"it must be in (0, {float(ell)!r}) m (a crank as long as its rod cannot turn a "
+                "full revolution)"
+            )
 
     def build(self, params):
         p = params
