@@ -11,12 +11,20 @@ import tempfile
 
 import numpy as np
 
+TEMP_PREFIX = ".tmp-"
+
 
 def atomic_write_bytes(path: str, data: bytes) -> None:
-    """Write to a temporary file in the same folder, fsync, then rename over `path`."""
+    """Write to a temporary file in the same folder, fsync, then rename over `path`.
+
+    A reader (or a crash at any moment) sees either the previous file or the complete new one:
+    `os.replace` is atomic on POSIX within one file system. On an exception the temporary file
+    is removed; after a hard kill (SIGKILL, power loss) a hidden `.tmp-*` file may remain, never
+    a truncated `path`.
+    """
     folder = os.path.dirname(os.path.abspath(path))
     os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-", suffix=os.path.basename(path))
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=TEMP_PREFIX, suffix=os.path.basename(path))
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
@@ -27,6 +35,31 @@ def atomic_write_bytes(path: str, data: bytes) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+    _fsync_folder(folder)
+
+
+def _fsync_folder(folder: str) -> None:
+    # Makes the rename itself durable; not every platform can open a folder.
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def atomic_savefig(fig, path: str, **kwargs) -> None:
+    """`fig.savefig` through `atomic_write_bytes` (format from the file extension)."""
+    import io
+
+    buffer = io.BytesIO()
+    fmt = os.path.splitext(path)[1].lstrip(".") or None
+    fig.savefig(buffer, format=fmt, **kwargs)
+    atomic_write_bytes(path, buffer.getvalue())
 
 
 def _jsonable(value):
@@ -72,11 +105,19 @@ def run_metadata() -> dict:
     }
 
 
-def prepare_output_dir(path: str, overwrite: bool) -> None:
-    """Create `path`; refuse a non-empty existing folder unless `overwrite`."""
+def check_output_dir(path: str, overwrite: bool) -> None:
+    """Refuse (`FileExistsError`) a non-empty existing folder unless `overwrite`; a file in
+    the way is refused too. Creates nothing, so it can run before any work is done."""
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise FileExistsError(f"output path {path!r} exists and is not a folder")
     if os.path.isdir(path) and os.listdir(path) and not overwrite:
         raise FileExistsError(
             f"output folder {path!r} already holds results; pass --overwrite to replace them "
             "or choose another --out"
         )
+
+
+def prepare_output_dir(path: str, overwrite: bool) -> None:
+    """Create `path`; refuse a non-empty existing folder unless `overwrite`."""
+    check_output_dir(path, overwrite)
     os.makedirs(path, exist_ok=True)

@@ -10,6 +10,7 @@ import os
 
 import numpy as np
 
+from ..io import atomic_savefig
 from .contact_forces import clearance_joint_history
 from .spectra import amplitude_spectrum, peak_frequency
 
@@ -138,7 +139,7 @@ def plot_deploy_array(scene, params, mechanism, trajectory, out_dir) -> list[str
     def save(fig, name):
         fig.tight_layout()
         path = os.path.join(out_dir, name)
-        fig.savefig(path, dpi=130)
+        atomic_savefig(fig, path, dpi=130)
         plt.close(fig)
         files.append(path)
 

@@ -7,6 +7,7 @@ import os
 
 import numpy as np
 
+from ..io import atomic_savefig
 from .contact_forces import clearance_joint_history
 
 
@@ -50,7 +51,7 @@ def plot_slider_crank(scene, params, mechanism, trajectory, out_dir) -> list[str
     ax.grid(alpha=0.3)
     fig.tight_layout()
     path = os.path.join(out_dir, "slider_acceleration.png")
-    fig.savefig(path, dpi=130)
+    atomic_savefig(fig, path, dpi=130)
     plt.close(fig)
     files.append(path)
 
@@ -72,7 +73,7 @@ def plot_slider_crank(scene, params, mechanism, trajectory, out_dir) -> list[str
         ax2.grid(alpha=0.3)
         fig.tight_layout()
         path = os.path.join(out_dir, "journal_orbit_contact_force.png")
-        fig.savefig(path, dpi=130)
+        atomic_savefig(fig, path, dpi=130)
         plt.close(fig)
         files.append(path)
     return files

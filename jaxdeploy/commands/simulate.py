@@ -4,6 +4,7 @@ write its trajectory, plots and summary."""
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 
@@ -35,37 +36,57 @@ def parse_assignments(items: list[str]) -> dict[str, float]:
     return out
 
 
+def _refuse(message: str) -> int:
+    print(f"error: {message}", file=sys.stderr)
+    return 2
+
+
 def run(args) -> int:
-    from ..io import atomic_write_json, atomic_write_npz, prepare_output_dir, run_metadata
+    import math
+
+    from ..io import (
+        atomic_write_json,
+        atomic_write_npz,
+        check_output_dir,
+        prepare_output_dir,
+        run_metadata,
+    )
+    from ..mechanism import AssemblyError
     from ..scenes import SCENES, get_scene
     from ..simulation import simulate
 
+    # Every refusal happens here, before the output folder is created and before the solver
+    # is compiled: a bad run leaves nothing behind.
     scene_name = args.scene or DEFAULT_SCENE
     if scene_name not in SCENES:
-        print(
-            f"error: unknown scene {scene_name!r}; valid: {', '.join(sorted(SCENES))}",
-            file=sys.stderr,
-        )
-        return 2
+        return _refuse(f"unknown scene {scene_name!r}; valid: {', '.join(sorted(SCENES))}")
     scene = get_scene(scene_name)
     try:
         params = scene.resolve_params(parse_assignments(args.set))
     except ValueError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        return _refuse(str(err))
+    t_end = scene.default_t_end if args.t_end is None else args.t_end
+    if not (math.isfinite(t_end) and t_end > 0):
+        return _refuse(f"--t-end = {t_end} is invalid: it must be finite and in (0, inf) s")
+    if args.n_save < 2:
+        return _refuse(f"--n-save = {args.n_save} is invalid: it must be an integer >= 2")
     out = args.out or f"results/{scene_name}"
     try:
-        prepare_output_dir(out, args.overwrite)
+        check_output_dir(out, args.overwrite)
     except FileExistsError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-    t_end = scene.default_t_end if args.t_end is None else args.t_end
-    if not t_end > 0:
-        print(f"error: --t-end = {t_end} is invalid: it must be > 0 (s)", file=sys.stderr)
-        return 2
+        return _refuse(str(err))
+    try:
+        mechanism = scene.build(params)
+        initial = scene.initial_state(params, mechanism)
+    except (ValueError, AssemblyError) as err:
+        return _refuse(f"scene {scene_name!r} with these parameters: {err}")
+    prepare_output_dir(out, args.overwrite)
+    # summary.json is written last and marks a complete result; drop the old one first so a
+    # rerun that dies half-way cannot pass for a complete result.
+    stale_marker = os.path.join(out, "summary.json")
+    if os.path.exists(stale_marker):
+        os.unlink(stale_marker)
 
-    mechanism = scene.build(params)
-    initial = scene.initial_state(params, mechanism)
     control = dict(scene.default_control)
     start = time.perf_counter()
     trajectory = simulate(
@@ -91,6 +112,8 @@ def run(args) -> int:
     }
     summary.update(scene.summary(params, mechanism, trajectory))
     summary["params"] = params
+    # simulate draws no random numbers: the run is reproducible from params and versions.
+    summary["seed"] = None
     summary["step_control"] = control
     summary["versions"] = run_metadata()
     atomic_write_npz(
