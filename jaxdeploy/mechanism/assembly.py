@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.flatten_util
 import jax.numpy as jnp
@@ -137,18 +138,38 @@ def _worst_element(mechanism: Mechanism, q, t) -> str:
     return where
 
 
-def _check_rank(mechanism: Mechanism, q, t, fixed, what: str):
-    jac = np.asarray(mechanism.constraint_jacobian(q, t))
+def _singular_value_range(mechanism: Mechanism, q, t, fixed):
+    """Largest and smallest singular values of Φ_q (augmented by the fixed coordinates, which
+    is what the assembly solved). Diagnostics only: no derivatives flow through them."""
+    jac = jax.lax.stop_gradient(mechanism.constraint_jacobian(q, t))
+    if fixed:
+        jac = jnp.concatenate([jac, jnp.eye(q.shape[0])[jnp.asarray(tuple(fixed), dtype=int)]])
     if jac.shape[0] == 0:
-        return
-    sv = np.linalg.svd(jac, compute_uv=False)
-    scale = max(1.0, float(sv[0]))
-    if sv[-1] < 1e-9 * scale:
+        return jnp.ones(()), jnp.ones(())
+    sv = jnp.linalg.svd(jac, compute_uv=False)
+    return sv[0], sv[-1]
+
+
+def _check_rank(sv_max, sv_min, shape, what: str):
+    scale = max(1.0, float(sv_max))
+    if float(sv_min) < 1e-9 * scale:
         raise AssemblyError(
-            f"{what}: the constraint Jacobian Φ_q ({jac.shape[0]}×{jac.shape[1]}) is rank "
-            f"deficient at this pose (smallest singular value {sv[-1]:.3g}); the constraints "
-            "are redundant or the pose is singular (e.g. a dead-centre position)."
+            f"{what}: the constraint Jacobian Φ_q ({shape[0]}×{shape[1]}) is rank "
+            f"deficient at this pose (smallest singular value {float(sv_min):.3g}); the "
+            "constraints are redundant or the pose is singular (e.g. a dead-centre position)."
         )
+
+
+@eqx.filter_jit
+def _consistent_core(mechanism, q_guess, v_guess, t, fixed, fixed_velocities, tol):
+    """Everything of `consistent_state` as one compiled program (op-by-op dispatch of the
+    Gauss–Newton loop and the Jacobians would cost seconds of small compilations)."""
+    q, res, it = assemble_positions(mechanism, q_guess, t, fixed, tol)
+    sv_max, sv_min = _singular_value_range(mechanism, q, t, ())
+    v = project_velocities(mechanism, q, v_guess, t, fixed_velocities)
+    memory = mechanism.init_memory(q, v)
+    qdd, lam = mechanism.accelerations(q, v, t, memory)
+    return ConsistentState(q, v, qdd, lam, memory), (res, it, sv_max, sv_min)
 
 
 def consistent_state(
@@ -180,17 +201,18 @@ def consistent_state(
             f"{mechanism.n_coordinates} coordinates (3 per body)"
         )
     v_guess = jnp.zeros_like(q_guess) if v_guess is None else jnp.asarray(v_guess, dtype=float)
-    q, res, it = assemble_positions(mechanism, q_guess, t, fixed, tol)
-    if is_concrete((q, res)):
+    state, (res, it, sv_max, sv_min) = _consistent_core(
+        mechanism, q_guess, v_guess, t, tuple(fixed), tuple(fixed_velocities), tol
+    )
+    if is_concrete((state.q, res)):
         if not np.isfinite(float(res)) or float(res) > 1e3 * tol:
             raise AssemblyError(
                 f"could not assemble the initial pose: constraint residual {float(res):.3g} "
                 f"after {int(it)} Gauss–Newton iterations (tolerance {tol:g}); "
-                f"{_worst_element(mechanism, q, t)}. The guess is too far from a feasible "
+                f"{_worst_element(mechanism, state.q, t)}. The guess is too far from a feasible "
                 "pose or the geometry cannot close."
             )
-        _check_rank(mechanism, q, t, fixed, "initial pose")
-    v = project_velocities(mechanism, q, v_guess, t, fixed_velocities)
-    memory = mechanism.init_memory(q, v)
-    qdd, lam = mechanism.accelerations(q, v, t, memory)
-    return ConsistentState(q, v, qdd, lam, memory)
+        shape = (mechanism.n_constraints, mechanism.n_coordinates)
+        if shape[0] > 0:
+            _check_rank(sv_max, sv_min, shape, "initial pose")
+    return state
