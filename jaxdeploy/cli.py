@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ._compilation_cache import enable_compilation_cache
 from .commands import discover
 
 
@@ -16,6 +17,7 @@ def main(argv=None) -> int:
         module.add_arguments(sub.add_parser(module.NAME, help=module.HELP))
         runners[module.NAME] = module.run
     args = parser.parse_args(argv)
+    enable_compilation_cache()
     return runners[args.command](args)
 
 
