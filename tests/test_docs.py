@@ -25,3 +25,14 @@ def test_mechanism_page_four_bar_runs():
     mech = namespace["mechanism"]
     assert float(np.max(np.abs(mech.constraints(trajectory.q[-1], 0.2)))) < 1e-9
     assert np.isfinite(float(namespace["final_rocker_angle"](1e-4)))
+
+
+def test_deploy_array_page_batch_example_runs():
+    namespace = {}
+    for block in _python_blocks("deploy_array.md"):
+        exec(compile(block, "docs/deploy_array.md", "exec"), namespace)
+    assert namespace["batch"].statuses() == ["ok", "ok"]
+    alpha = namespace["alpha"]
+    # Both cases start at 45° and are opening.
+    for a in alpha:
+        assert abs(a[0] - np.pi / 4) < 1e-9 and a[-1] > a[0]
