@@ -6,6 +6,12 @@ a second `jaxdeploy simulate` with the same scene composition loads the compiled
 instead. Parameter values are data, so changing `--set` values does not miss the cache;
 changing what is composed (e.g. friction exactly 0) compiles once more.
 
+JAX does not store programs that contain host callbacks. Equinox's runtime checks
+(`eqx.error_if`, which diffrax uses to check `dt0`'s sign and that `SaveAt.ts` is sorted and
+inside [t0, t1]) are host callbacks unless `EQX_ON_ERROR` is `nan` or `off`. The command line
+therefore sets `EQX_ON_ERROR=nan` (unless the user set it) before equinox is imported, and
+`simulate` checks those same conditions in Python before tracing, so they cannot fire.
+
 Location: `$JAXDEPLOY_CACHE_DIR`, else `$XDG_CACHE_HOME/jaxdeploy/xla`, else
 `~/.cache/jaxdeploy/xla`. Set `JAXDEPLOY_CACHE_DIR=off` to disable.
 """
@@ -21,6 +27,14 @@ def cache_dir() -> str | None:
         return None if chosen.strip().lower() in ("", "off", "0", "none") else chosen
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return os.path.join(base, "jaxdeploy", "xla")
+
+
+def prefer_cacheable_errors() -> None:
+    """Ask equinox for callback-free runtime checks (see the module docstring). Must run
+    before equinox is imported to have an effect; does nothing when the cache is off or the
+    user chose `EQX_ON_ERROR` themselves."""
+    if cache_dir() is not None:
+        os.environ.setdefault("EQX_ON_ERROR", "nan")
 
 
 def enable_compilation_cache() -> str | None:

@@ -5,8 +5,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ._compilation_cache import enable_compilation_cache
-from .commands import discover
+from ._compilation_cache import enable_compilation_cache, prefer_cacheable_errors
+
+prefer_cacheable_errors()  # before any command module imports equinox
+
+from .commands import discover  # noqa: E402
 
 
 def main(argv=None) -> int:

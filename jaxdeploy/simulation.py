@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._validation import is_concrete
 from .mechanism import ConsistentState, Mechanism
 from .solvers import GeneralizedAlpha, MechanismState, MechanismTerm
 
@@ -83,8 +84,24 @@ class Trajectory(eqx.Module):
 
 
 def _save_times(t0, t_end, n_save, ts):
+    """Output times, checked here (in Python, when concrete) rather than by diffrax's runtime
+    checks, which may be compiled out (see jaxdeploy/_compilation_cache.py)."""
+    if is_concrete((t0, t_end)) and not float(t_end) > float(t0):
+        raise ValueError(f"t_end = {t_end!r} is invalid: it must be > t0 = {t0!r} (s)")
     if ts is not None:
-        return jnp.asarray(ts, dtype=float)
+        ts = jnp.asarray(ts, dtype=float)
+        if is_concrete((ts, t0, t_end)):
+            values = np.asarray(ts)
+            if values.ndim != 1 or values.size == 0:
+                raise ValueError(f"ts has shape {values.shape}: it must be a non-empty 1-D array")
+            if np.any(np.diff(values) < 0) or not np.all(np.isfinite(values)):
+                raise ValueError("ts is invalid: save times must be finite and non-decreasing")
+            if values[0] < float(t0) or values[-1] > float(t_end):
+                raise ValueError(
+                    f"ts is invalid: save times [{values[0]:g}, {values[-1]:g}] s must lie in "
+                    f"[t0, t_end] = [{float(t0):g}, {float(t_end):g}] s"
+                )
+        return ts
     return jnp.linspace(t0, t_end, n_save)
 
 

@@ -41,3 +41,37 @@ def test_out_of_range_parameter_names_the_range(tmp_path, capsys):
 def test_set_requires_name_equals_value(tmp_path):
     with pytest.raises(SystemExit, match="NAME=VALUE"):
         main(["simulate", "pendulum", "--set", "length", "--out", str(tmp_path / "d")])
+
+
+def test_compiled_simulation_is_kept_in_the_persistent_cache(tmp_path):
+    """A fresh `jaxdeploy simulate` stores the compiled solve (no host callbacks in it), so
+    the next run with the same composition loads it instead of compiling."""
+    import os
+    import subprocess
+    import sys
+
+    cache = tmp_path / "xla"
+    env = {k: v for k, v in os.environ.items() if k != "EQX_ON_ERROR"}
+    env["JAXDEPLOY_CACHE_DIR"] = str(cache)
+    cmd = [sys.executable, "-m", "jaxdeploy.cli", "simulate", "pendulum", "--t-end", "0.05"]
+    proc = subprocess.run(
+        [*cmd, "--out", str(tmp_path / "run"), "--quiet"], env=env, capture_output=True, text=True
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert any(p.name.startswith("jit__solve-") for p in cache.iterdir())
+
+
+def test_save_times_are_checked_before_the_solve():
+    from jaxdeploy.scenes import Pendulum
+    from jaxdeploy.simulation import simulate
+
+    scene = Pendulum()
+    params = scene.resolve_params()
+    mech = scene.build(params)
+    init = scene.initial_state(params, mech)
+    with pytest.raises(ValueError, match="non-decreasing"):
+        simulate(mech, init, 0.1, dt=1e-3, ts=[0.0, 0.05, 0.02])
+    with pytest.raises(ValueError, match="must lie in"):
+        simulate(mech, init, 0.1, dt=1e-3, ts=[0.0, 0.2])
+    with pytest.raises(ValueError, match="t_end"):
+        simulate(mech, init, 0.0, dt=1e-3)
