@@ -1,0 +1,283 @@
+"""`jaxdeploy fit DATA --scene S --params NAME[=guess[:low:high]] ... --out DIR`: fit scene
+parameters to measured channels; write estimates with standard errors and correlations, the
+loss history and data-against-model plots."""
+
+from __future__ import annotations
+
+import sys
+
+NAME = "fit"
+HELP = "fit scene parameters to measured channels (CSV/npz), with uncertainties"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("data", help="measurements: .csv or .npz (time column t + channels)")
+    parser.add_argument("--scene", required=True, help="scene name, e.g. deploy_array")
+    parser.add_argument(
+        "--params",
+        nargs="+",
+        action="extend",
+        required=True,
+        metavar="NAME[=guess[:low:high]]",
+        help="parameters to fit (SI units); default guess: scene default, bounds guess/10..x10",
+    )
+    parser.add_argument("--out", required=True, help="output folder")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="fixed value of another scene parameter",
+    )
+    parser.add_argument(
+        "--scene-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="scene constructor option, e.g. damping=lankarani_nikravesh",
+    )
+    parser.add_argument(
+        "--channels",
+        default=None,
+        help="comma-separated channels to fit (default: all in the file)",
+    )
+    parser.add_argument(
+        "--noise",
+        action="append",
+        default=[],
+        metavar="[CHANNEL=]SIGMA",
+        help="noise level (one standard deviation); overrides the file's",
+    )
+    parser.add_argument(
+        "--loss",
+        choices=("trajectory", "block"),
+        default="trajectory",
+        help="pointwise residuals or block means (a low-pass feature)",
+    )
+    parser.add_argument("--block", type=float, default=None, help="block duration [s]")
+    parser.add_argument(
+        "--window",
+        action="append",
+        default=[],
+        metavar="T0:T1",
+        help="fit only samples in [T0, T1] s (repeatable)",
+    )
+    parser.add_argument(
+        "--horizons",
+        default=None,
+        metavar="T1,T2,...",
+        help="continuation: fit up to T1, then T2, ... (each from the last)",
+    )
+    parser.add_argument("--max-iterations", type=int, default=30)
+    parser.add_argument("--rtol", type=float, default=None, help="model step control")
+    parser.add_argument("--atol", type=float, default=None)
+    parser.add_argument("--dt-max", type=float, default=None)
+    parser.add_argument(
+        "--dt",
+        type=float,
+        default=None,
+        help="fixed model step [s] (a loss smooth in the parameters)",
+    )
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing result")
+    parser.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def _fail(message: str) -> int:
+    print(f"error: {message}", file=sys.stderr)
+    return 2
+
+
+def _pairs(items, what):
+    out = {}
+    for item in items:
+        if "=" not in item:
+            raise ValueError(f"{what} expects KEY=VALUE, got {item!r}")
+        key, value = (s.strip() for s in item.split("=", 1))
+        out[key] = value
+    return out
+
+
+def _windows(items):
+    out = []
+    for item in items:
+        parts = item.split(":")
+        try:
+            t0, t1 = (float(p) for p in parts)
+        except ValueError:
+            raise ValueError(f"--window {item!r}: expected T0:T1 in seconds") from None
+        out.append((t0, t1))
+    return tuple(out) or None
+
+
+def _stages(args, data):
+    from ..fit import ResidualSpec
+
+    windows = _windows(args.window)
+    block = args.block if args.loss == "block" else None
+    if not args.horizons:
+        return [ResidualSpec(args.loss, windows, block)]
+    try:
+        horizons = [float(h) for h in args.horizons.split(",")]
+    except ValueError:
+        raise ValueError(
+            f"--horizons {args.horizons!r}: expected times in s, e.g. 0.05,0.2"
+        ) from None
+    increasing = all(b > a for a, b in zip(horizons, horizons[1:], strict=False))
+    if not increasing or horizons[0] <= data.t[0]:
+        raise ValueError(f"--horizons {args.horizons!r}: times must increase and exceed t[0]")
+    stages = []
+    base = windows or ((float(data.t[0]), float(data.t[-1])),)
+    for h in horizons:
+        clipped = tuple((a, min(b, h)) for a, b in base if a < h)
+        stages.append(ResidualSpec(args.loss, clipped, block))
+    return stages
+
+
+def _progress(names):
+    def show(entry):
+        mark = "accepted" if entry["accepted"] else "rejected"
+        values = " ".join(f"{n}={entry['params'][n]:.6g}" for n in names)
+        print(
+            f"  stage {entry['stage']} eval {entry['iteration']:3d}  cost {entry['cost']:.6g}"
+            f"  {mark:8s}  {values}",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    return show
+
+
+def run(args) -> int:
+    import time
+
+    import numpy as np
+
+    from ..fit import MeasurementError, fit, load_measurements, make_parameters
+    from ..fit._plots import plot_fit
+    from ..io import (
+        atomic_write_bytes,
+        atomic_write_json,
+        atomic_write_npz,
+        prepare_output_dir,
+        run_metadata,
+    )
+    from ..scenes import get_scene
+    from .simulate import parse_assignments
+
+    try:
+        scene = get_scene(args.scene, **_pairs(args.scene_option, "--scene-option"))
+    except (ValueError, TypeError) as err:
+        return _fail(f"--scene {args.scene}: {err}")
+    try:
+        data = load_measurements(args.data)
+        if args.channels:
+            data = data.select([c.strip() for c in args.channels.split(",") if c.strip()])
+        if args.noise:
+            noise = {}
+            for item in args.noise:
+                if "=" in item:
+                    key, value = item.split("=", 1)
+                    noise[key.strip()] = float(value)
+                else:
+                    noise.update({n: float(item) for n in data.names})
+            data = data.with_noise(noise)
+        fixed = scene.resolve_params(parse_assignments(args.set))
+        params = make_parameters(scene, args.params, fixed)
+        stages = _stages(args, data)
+    except (MeasurementError, ValueError) as err:
+        return _fail(str(err))
+    if args.max_iterations < 1:
+        return _fail(f"--max-iterations = {args.max_iterations} is invalid: it must be >= 1")
+    control = {}
+    if args.dt is not None:
+        if not args.dt > 0:
+            return _fail(f"--dt = {args.dt} is invalid: it must be > 0 (s)")
+        control = {"rtol": None, "atol": None, "dt_max": None, "dt_min": None, "dt": args.dt}
+    for key in ("rtol", "atol", "dt_max"):
+        value = getattr(args, key)
+        if value is not None:
+            if not value > 0:
+                return _fail(f"--{key.replace('_', '-')} = {value} is invalid: it must be > 0")
+            control[key] = value
+    try:
+        prepare_output_dir(args.out, args.overwrite)
+    except FileExistsError as err:
+        return _fail(str(err))
+
+    names = [p.name for p in params]
+    if not args.quiet:
+        print(
+            f"fitting {', '.join(names)} of {scene.name} to {', '.join(data.names)} "
+            f"({data.t.size} samples); compiling the model first...",
+            file=sys.stderr,
+            flush=True,
+        )
+    start = time.perf_counter()
+    try:
+        result = fit(
+            scene,
+            data,
+            params,
+            fixed=fixed,
+            residuals=stages,
+            control=control,
+            max_iterations=args.max_iterations,
+            callback=None if args.quiet else _progress(names),
+        )
+    except (RuntimeError, ValueError) as err:
+        return _fail(str(err))
+    wall = time.perf_counter() - start
+
+    report = result.report()
+    report.update(
+        scene=scene.name,
+        scene_options=_pairs(args.scene_option, "--scene-option"),
+        data=args.data,
+        channels=list(data.names),
+        noise_levels=result.comparison.sigma,
+        step_control={**scene.default_control, **control},
+        params={**fixed, **result.estimates},
+        seed=None,
+        randomness="none: Levenberg–Marquardt is deterministic from the initial guess",
+        command=sys.argv,
+        wall_time_s=wall,
+        versions=run_metadata(),
+    )
+    atomic_write_json(f"{args.out}/fit.json", report)
+    rows = ["stage,evaluation,cost,accepted,damping," + ",".join(names)]
+    for h in result.history:
+        rows.append(
+            f"{h['stage']},{h['iteration']},{h['cost']!r},{int(h['accepted'])},{h['damping']!r},"
+            + ",".join(repr(h["params"][n]) for n in names)
+        )
+    atomic_write_bytes(f"{args.out}/history.csv", ("\n".join(rows) + "\n").encode())
+    cmp_ = result.comparison
+    arrays = {"t": cmp_.times}
+    for n in cmp_.names:
+        arrays[f"data_{n}"] = cmp_.data_features[n]
+        arrays[f"initial_{n}"] = np.asarray(cmp_.features(result.model_initial[n]))
+        arrays[f"fitted_{n}"] = np.asarray(cmp_.features(result.model_final[n]))
+    atomic_write_npz(f"{args.out}/fit.npz", **arrays)
+    figures = plot_fit(result, args.out)
+
+    width = max(len(n) for n in names)
+    print(f"{'parameter':<{width}}  {'estimate':>12}  {'std. error':>11}  {'rel.':>7}")
+    for n in names:
+        rel = result.relative_errors()[n]
+        print(
+            f"{n:<{width}}  {result.estimates[n]:12.6g}  {result.standard_errors[n]:11.3g}"
+            f"  {rel:7.2%}"
+        )
+    print(
+        f"chi2/dof = {result.reduced_chi2:.3g} ({result.n_residuals} residuals, noise "
+        f"{report['noise']}); {result.iterations} LM trial steps; {result.message}"
+    )
+    for n in result.not_identified():
+        print(
+            f"warning: {n} is not identified by these channels (std. error > "
+            f"{50:.0f} % of the value)"
+        )
+    for a, b, c in result.confounded_pairs():
+        print(f"warning: {a} and {b} are confounded (correlation {c:+.3f})")
+    print(f"wrote {args.out}/fit.json, history.csv, fit.npz, " + ", ".join(figures))
+    return 0 if result.converged else 1

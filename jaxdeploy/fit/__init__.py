@@ -1,0 +1,29 @@
+"""Identification: fit scene parameters to measured channels, with honest uncertainties.
+
+`load_measurements` reads CSV/npz data, `fit` runs Levenberg–Marquardt through the simulation
+(forward-mode derivatives through the generalized-α solver), `FitResult` reports estimates,
+standard errors, correlations and the loss history; `synthesize` makes noisy synthetic data
+from a scene. See docs/identification.md.
+"""
+
+from ._data import MeasurementError, Measurements, load_measurements
+from ._fit import FitResult, fit, levenberg_marquardt
+from ._parameters import FitParameter, make_parameters, parse_param_spec
+from ._residuals import Comparison, ResidualSpec
+from ._synthetic import model_channels, synthesize
+
+__all__ = [
+    "Comparison",
+    "FitParameter",
+    "FitResult",
+    "MeasurementError",
+    "Measurements",
+    "ResidualSpec",
+    "fit",
+    "levenberg_marquardt",
+    "load_measurements",
+    "make_parameters",
+    "model_channels",
+    "parse_param_spec",
+    "synthesize",
+]

@@ -1,0 +1,369 @@
+"""Fitting scene parameters to measurements: Levenberg–Marquardt on noise-weighted residuals,
+with uncertainties from the Gauss–Newton curvature at the optimum.
+
+The model is `run_scene` (the whole simulation is a JAX function of the parameters); the
+Jacobian of the residuals with respect to the internal (bounded, `FitParameter`) coordinates
+comes from forward-mode AD through the solver (`jax.jacfwd` with `diffrax.ForwardMode`: one
+tangent per fitted parameter, so the cost grows with the number of parameters, which is small
+here). Residuals and Jacobian are one compiled function, evaluated once per LM trial step.
+
+Levenberg–Marquardt with Marquardt's diagonal scaling and Nielsen's damping update
+(K. Madsen, H. B. Nielsen, O. Tingleff, *Methods for non-linear least squares problems*,
+2nd ed., DTU 2004, Algorithm 3.16 and eq. 3.14). The loop runs in Python around the compiled
+evaluation so that every iteration is reported (progress, loss history) and a failed
+simulation is a rejected step, not a NaN in the optimiser.
+
+Uncertainty (e.g. Bates & Watts, *Nonlinear Regression Analysis*, 1988, §2.3): with residuals
+in noise units, the covariance of the estimates is `C = (J_θᵀ J_θ)⁻¹`, J_θ the Jacobian in
+physical units at the optimum; when the noise level was not given it is estimated,
+`C = s² (J_θᵀ J_θ)⁻¹`, `s² = χ²/(N − p)`. Standard errors `√C_ii`, correlations
+`C_ij/√(C_ii C_jj)`. A parameter the channels do not determine shows as a standard error
+comparable to or larger than the value, or a correlation near ±1 with another parameter;
+the singular values of the relative Jacobian `J_θ diag(θ)` say how well each direction of
+parameter space is seen.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._data import Measurements
+from ._parameters import FitParameter, internal_vector, make_parameters
+from ._residuals import Comparison, ResidualSpec
+
+# A parameter whose standard error exceeds this fraction of its value is reported as not
+# identified; a pair with |correlation| above CORRELATED as confounded.
+NOT_IDENTIFIED = 0.5
+CORRELATED = 0.95
+
+
+@dataclass
+class FitResult:
+    """What a fit found and how well determined it is (see the module docstring)."""
+
+    parameters: list[FitParameter]
+    estimates: dict[str, float]
+    standard_errors: dict[str, float]
+    correlation: np.ndarray
+    covariance: np.ndarray
+    singular_values: np.ndarray
+    chi2: float
+    n_residuals: int
+    noise_known: bool
+    iterations: int
+    evaluations: int
+    converged: bool
+    message: str
+    history: list[dict]
+    wall_time: float
+    comparison: Comparison
+    model_initial: dict[str, np.ndarray]
+    model_final: dict[str, np.ndarray]
+    stages: list[dict] = field(default_factory=list)
+
+    @property
+    def names(self) -> list[str]:
+        return [p.name for p in self.parameters]
+
+    @property
+    def reduced_chi2(self) -> float:
+        dof = self.n_residuals - len(self.parameters)
+        return self.chi2 / dof if dof > 0 else math.nan
+
+    def relative_errors(self) -> dict[str, float]:
+        return {n: self.standard_errors[n] / abs(self.estimates[n]) for n in self.names}
+
+    def not_identified(self) -> list[str]:
+        return [n for n, r in self.relative_errors().items() if not r <= NOT_IDENTIFIED]
+
+    def confounded_pairs(self) -> list[tuple[str, str, float]]:
+        out = []
+        for i, a in enumerate(self.names):
+            for j in range(i + 1, len(self.names)):
+                c = float(self.correlation[i, j])
+                if not abs(c) <= CORRELATED:
+                    out.append((a, self.names[j], c))
+        return out
+
+    def report(self) -> dict:
+        """A JSON-ready summary."""
+        return {
+            "estimates": self.estimates,
+            "standard_errors": self.standard_errors,
+            "relative_standard_errors": self.relative_errors(),
+            "correlation": {
+                a: {b: float(self.correlation[i, j]) for j, b in enumerate(self.names)}
+                for i, a in enumerate(self.names)
+            },
+            "bounds": {p.name: [p.low, p.high] for p in self.parameters},
+            "initial_guess": {p.name: p.guess for p in self.parameters},
+            "singular_values_relative_jacobian": list(map(float, self.singular_values)),
+            "not_identified": self.not_identified(),
+            "confounded_pairs": [list(x) for x in self.confounded_pairs()],
+            "chi2": self.chi2,
+            "n_residuals": self.n_residuals,
+            "reduced_chi2": self.reduced_chi2,
+            "noise": "given" if self.noise_known else "estimated from the residuals",
+            "iterations": self.iterations,
+            "evaluations": self.evaluations,
+            "converged": self.converged,
+            "message": self.message,
+            "wall_time_s": self.wall_time,
+            "stages": self.stages,
+        }
+
+
+class Model:
+    """The compiled map z → (residuals, Jacobian, model channels, solver status) for one scene,
+    one parameter set to fit and one `Comparison`."""
+
+    def __init__(self, scene, parameters, fixed, comparison, control, simulate_options):
+        import diffrax as dfx
+        import jax
+        import jax.numpy as jnp
+
+        from ..batch import run_scene
+
+        names = list(comparison.names)
+
+        def evaluate(z):
+            params = dict(fixed)
+            for k, p in enumerate(parameters):
+                params[p.name] = p.to_physical(z[k])
+            traj = run_scene(
+                scene,
+                params,
+                comparison.t_end,
+                ts=jnp.asarray(comparison.ts),
+                control=control,
+                adjoint=dfx.ForwardMode(),
+                **simulate_options,
+            )
+            channels = scene.channels(scene.build(params), traj)
+            missing = [n for n in names if n not in channels]
+            if missing:
+                raise ValueError(
+                    f"channel {missing[0]!r} is not an output of scene {scene.name!r}; valid: "
+                    + ", ".join(sorted(channels))
+                )
+            model = {n: channels[n] for n in names}
+            r = comparison.residuals(model)
+            return r, (r, model, traj.result == dfx.RESULTS.successful)
+
+        self._jac = jax.jit(jax.jacfwd(evaluate, has_aux=True))
+
+    def __call__(self, z):
+        jac, (r, model, ok) = self._jac(np.asarray(z, dtype=float))
+        r = np.asarray(r)
+        ok = bool(ok) and bool(np.all(np.isfinite(r))) and bool(np.all(np.isfinite(jac)))
+        return r, np.asarray(jac), {n: np.asarray(v) for n, v in model.items()}, ok
+
+
+def levenberg_marquardt(
+    model: Callable,
+    z0: np.ndarray,
+    *,
+    max_iterations: int = 30,
+    ftol: float = 1e-8,
+    xtol: float = 1e-8,
+    gtol: float = 1e-10,
+    tau: float = 1e-3,
+    callback: Callable | None = None,
+):
+    """Minimise ½|r(z)|² with `model(z) -> (r, J, aux, ok)` (Madsen et al. 2004, Alg. 3.16,
+    Marquardt scaling `D = diag(JᵀJ)`).
+
+    Stops when an accepted step lowers the cost by less than `ftol` relative, when the step
+    is below `xtol (|z| + xtol)`, when `|Jᵀr|_∞ ≤ gtol`, or after `max_iterations` trial
+    steps. **Returns:** `(z, r, J, aux, info)`.
+    """
+    r, jac, aux, ok = model(z0)
+    if not ok:
+        raise RuntimeError(
+            "the model cannot be evaluated at the initial guess (the simulation failed or "
+            "gave non-finite outputs); change the guess, the bounds or the step control"
+        )
+    aux0 = aux
+    z = np.asarray(z0, dtype=float)
+    cost = 0.5 * float(r @ r)
+    history = [dict(iteration=0, cost=cost, accepted=True, damping=math.nan, z=z.tolist())]
+    if callback:
+        callback(history[-1])
+    mu, nu = None, 2.0
+    evaluations, converged, message = 1, False, "maximum number of iterations reached"
+    iteration = 0
+    for iteration in range(1, max_iterations + 1):
+        a = jac.T @ jac
+        g = jac.T @ r
+        if np.max(np.abs(g)) <= gtol:
+            converged, message = True, "gradient below tolerance"
+            break
+        d = np.maximum(np.diag(a), 1e-12 * max(np.max(np.diag(a)), 1e-300))
+        mu = tau if mu is None else mu
+        h = np.linalg.solve(a + mu * np.diag(d), -g)
+        if np.linalg.norm(h) <= xtol * (np.linalg.norm(z) + xtol):
+            converged, message = True, "step below tolerance"
+            break
+        r_new, jac_new, aux_new, ok = model(z + h)
+        evaluations += 1
+        cost_new = 0.5 * float(r_new @ r_new) if ok else math.inf
+        predicted = 0.5 * float(h @ (mu * d * h - g))
+        rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
+        accepted = ok and rho > 0
+        if accepted:
+            decrease = (cost - cost_new) / cost
+            z, r, jac, aux, cost = z + h, r_new, jac_new, aux_new, cost_new
+            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+            nu = 2.0
+        else:
+            mu *= nu
+            nu *= 2.0
+        history.append(
+            dict(
+                iteration=iteration,
+                cost=cost if accepted else cost_new,
+                accepted=accepted,
+                damping=mu,
+                z=(z if accepted else z + h).tolist(),
+                simulation_ok=ok,
+            )
+        )
+        if callback:
+            callback(history[-1])
+        if accepted and decrease < ftol:
+            converged, message = True, "relative cost decrease below tolerance"
+            break
+    info = dict(
+        iterations=iteration,
+        evaluations=evaluations,
+        converged=converged,
+        message=message,
+        history=history,
+        aux_initial=aux0,
+    )
+    return z, r, jac, aux, info
+
+
+def _curvature(parameters, z, r, jac, noise_known):
+    """Covariance, standard errors, correlations and singular values at the optimum."""
+    theta = np.array([float(p.to_physical(zk)) for p, zk in zip(parameters, z, strict=True)])
+    dtheta = np.array([p.dphysical_dz(zk) for p, zk in zip(parameters, z, strict=True)])
+    jac_theta = jac / dtheta  # chain rule: ∂r/∂θ = ∂r/∂z / (dθ/dz)
+    jac_rel = jac_theta * theta  # ∂r/∂ln θ: columns comparable across units
+    _, s, vt = np.linalg.svd(jac_rel, full_matrices=False)
+    # Moore–Penrose inverse of the curvature: directions it does not see (singular values at
+    # roundoff level) are left out, and every parameter with a component along them gets an
+    # infinite standard error; the others keep their finite marginal errors.
+    seen = s > (s.max() if s.size else 0.0) * 1e-12
+    cov_rel = (vt[seen].T / s[seen] ** 2) @ vt[seen]
+    unseen = np.max(np.abs(vt[~seen]), axis=0) > 1e-6 if (~seen).any() else np.zeros(len(z), bool)
+    cov_rel[unseen, :] = np.inf
+    cov_rel[:, unseen] = np.inf
+    chi2 = float(r @ r)
+    n, p = r.size, len(parameters)
+    if not noise_known and n > p:
+        cov_rel = cov_rel * chi2 / (n - p)
+    cov = cov_rel * np.outer(theta, theta)
+    se = np.sqrt(np.diag(cov))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(se, se)
+    corr = np.where(np.isfinite(corr), corr, np.nan)
+    np.fill_diagonal(corr, 1.0)
+    return theta, se, corr, cov, s, chi2
+
+
+def fit(
+    scene,
+    data: Measurements,
+    parameters: Sequence,
+    *,
+    fixed: Mapping | None = None,
+    residuals: ResidualSpec | Sequence[ResidualSpec] | None = None,
+    control: Mapping | None = None,
+    max_iterations: int = 30,
+    ftol: float = 1e-8,
+    callback: Callable | None = None,
+    **simulate_options,
+) -> FitResult:
+    """Fit `parameters` of `scene` to `data`.
+
+    **Arguments:**
+    - `parameters`: specs for `make_parameters` (`"clearance=2e-4:1e-5:1e-3"`, tuples, or
+      `FitParameter`s).
+    - `fixed`: values of the other scene parameters (default: the scene's defaults).
+    - `residuals`: a `ResidualSpec` (default: every sample, pointwise) or a sequence of them,
+      fitted in turn (continuation: e.g. a short window or coarse block means first, each
+      stage starting from the previous estimate). Uncertainties come from the last stage.
+    - `control`: step control for the model runs (see `run_scene`); `simulate_options` go to
+      `simulate` (e.g. `solver`).
+    - `callback(entry)`: called after every LM trial step with a history entry.
+
+    **Returns:** a `FitResult`.
+    """
+    start = time.perf_counter()
+    base = scene.resolve_params(fixed or {})
+    params = make_parameters(scene, parameters, base)
+    for p in params:
+        scene.resolve_params({**base, p.name: p.guess})  # cross-checks at the guess
+    if residuals is None:
+        residuals = ResidualSpec()
+    specs = [residuals] if isinstance(residuals, ResidualSpec) else list(residuals)
+    z = internal_vector(params)
+    history, stages, evaluations = [], [], 0
+    model_initial = None
+    for k, spec in enumerate(specs):
+        comparison = Comparison(data, spec)
+        model = Model(scene, params, base, comparison, control, simulate_options)
+
+        def report(entry, k=k):
+            entry = dict(entry, stage=k)
+            entry["params"] = {
+                p.name: float(p.to_physical(zk)) for p, zk in zip(params, entry["z"], strict=True)
+            }
+            history.append(entry)
+            if callback:
+                callback(entry)
+
+        z, r, jac, aux, info = levenberg_marquardt(
+            model, z, max_iterations=max_iterations, ftol=ftol, callback=report
+        )
+        evaluations += info["evaluations"]
+        if model_initial is None:
+            model_initial = info["aux_initial"]
+        stages.append(
+            dict(
+                spec=dict(kind=spec.kind, windows=spec.windows, block=spec.block),
+                iterations=info["iterations"],
+                converged=info["converged"],
+                message=info["message"],
+                cost=0.5 * float(r @ r),
+            )
+        )
+    theta, se, corr, cov, s, chi2 = _curvature(params, z, r, jac, comparison.noise_known)
+    names = [p.name for p in params]
+    return FitResult(
+        parameters=params,
+        estimates=dict(zip(names, map(float, theta), strict=True)),
+        standard_errors=dict(zip(names, map(float, se), strict=True)),
+        correlation=corr,
+        covariance=cov,
+        singular_values=s,
+        chi2=chi2,
+        n_residuals=int(r.size),
+        noise_known=comparison.noise_known,
+        iterations=sum(st["iterations"] for st in stages),
+        evaluations=evaluations,
+        converged=all(st["converged"] for st in stages),
+        message=stages[-1]["message"],
+        history=history,
+        wall_time=time.perf_counter() - start,
+        comparison=comparison,
+        model_initial=model_initial,
+        model_final=aux,
+        stages=stages,
+    )

@@ -1,0 +1,190 @@
+"""Identification: `jaxdeploy fit` recovers known parameters within its reported standard
+errors; the Gauss–Newton covariance equals the closed form for a linear model; a parameter the
+data cannot see is reported as not identified; malformed data files are refused, naming the
+problem."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from jaxdeploy.cli import main
+from jaxdeploy.fit import (
+    FitParameter,
+    MeasurementError,
+    Measurements,
+    ResidualSpec,
+    fit,
+    levenberg_marquardt,
+    load_measurements,
+    make_parameters,
+    synthesize,
+)
+from jaxdeploy.fit._fit import _curvature
+from jaxdeploy.fit._residuals import Comparison
+from jaxdeploy.scenes import Impact, Pendulum
+
+
+def test_cli_fit_recovers_impact_parameters_within_reported_errors(tmp_path, capsys):
+    """Synthetic journal position and acceleration through a damped impact (1 % noise);
+    restitution and contact stiffness started far off are recovered within 3 standard
+    errors, and those errors are small."""
+    scene = Impact(damping="lankarani_nikravesh")
+    truth = {"restitution": 0.7, "stiffness": 1e10}
+    data = synthesize(
+        scene, truth, np.linspace(0.0, 6e-4, 121), ["journal_x", "journal_ax"], seed=3
+    )
+    path = tmp_path / "impact.csv"
+    data.save(str(path))
+    out = tmp_path / "fit"
+    argv = [
+        "fit", str(path), "--scene", "impact", "--scene-option", "damping=lankarani_nikravesh",
+        "--params", "restitution=0.4:0.05:0.99", "stiffness=2e10:1e8:1e12", "--out", str(out),
+    ]  # fmt: skip
+    assert main(argv) == 0
+    report = json.loads((out / "fit.json").read_text())
+    for name, value in truth.items():
+        est, se = report["estimates"][name], report["standard_errors"][name]
+        assert 0 < se < 0.05 * value
+        assert abs(est - value) < 3 * se, (name, est, se)
+    assert report["converged"] and report["noise"] == "given"
+    assert 0.7 < report["reduced_chi2"] < 1.3  # residuals at the optimum are the noise
+    assert report["params"]["restitution"] == report["estimates"]["restitution"]
+    assert "jax" in report["versions"] and "seed" in report
+    for name in ("history.csv", "fit.npz", "fit_journal_ax.png", "loss_history.png"):
+        assert (out / name).exists()
+    history = (out / "history.csv").read_text().splitlines()
+    assert history[0].startswith("stage,evaluation,cost")
+    costs = [float(row.split(",")[2]) for row in history[1:] if row.split(",")[3] == "1"]
+    assert costs[-1] < 1e-2 * costs[0]
+    assert "stage 0 eval" in capsys.readouterr().err  # progress lines
+    # No silent overwrite.
+    assert main(argv) == 2
+    assert "--overwrite" in capsys.readouterr().err
+
+
+def test_covariance_is_the_linear_least_squares_closed_form():
+    """For r = (X θ − y)/σ the estimate is the least-squares solution and the covariance
+    σ² (XᵀX)⁻¹, whatever the bounded reparametrisation θ(z) used inside."""
+    rng = np.random.default_rng(0)
+    x = np.column_stack([np.ones(40), np.linspace(0, 1, 40), np.linspace(0, 1, 40) ** 2])
+    theta_true = np.array([2.0, -1.0, 0.5])
+    sigma = 0.05
+    y = x @ theta_true + sigma * rng.standard_normal(40)
+    params = [FitParameter("a", 1.0, 0.1, 10.0), FitParameter("b", 0.0, -5.0, 5.0),
+              FitParameter("c", 0.2, -3.0, 3.0)]  # fmt: skip
+
+    def model(z):
+        theta = np.array([float(p.to_physical(zk)) for p, zk in zip(params, z, strict=True)])
+        dtheta = np.array([p.dphysical_dz(zk) for p, zk in zip(params, z, strict=True)])
+        return (x @ theta - y) / sigma, x * dtheta / sigma, None, True
+
+    z0 = np.array([p.to_internal(p.guess) for p in params])
+    z, r, jac, _, info = levenberg_marquardt(model, z0, max_iterations=100, ftol=1e-14)
+    theta, se, corr, cov, _, _ = _curvature(params, z, r, jac, noise_known=True)
+    np.testing.assert_allclose(theta, np.linalg.lstsq(x, y, rcond=None)[0], rtol=1e-7)
+    expected = sigma**2 * np.linalg.inv(x.T @ x)
+    np.testing.assert_allclose(cov, expected, rtol=1e-6)
+    expected_corr = expected[0, 1] / np.sqrt(expected[0, 0] * expected[1, 1])
+    np.testing.assert_allclose(corr[0, 1], expected_corr, rtol=1e-6)
+    assert info["converged"]
+
+
+def test_a_parameter_the_motion_does_not_depend_on_is_reported_not_identified():
+    """A pendulum's mass does not change its motion: the fit finds the length and reports the
+    mass's standard error as unbounded (noise level estimated from the residuals)."""
+    scene = Pendulum()
+    truth = {"length": 0.8, "initial_angle": -0.6}
+    data = synthesize(scene, truth, np.linspace(0, 1.0, 101), ["rod_theta"], seed=5)
+    data = Measurements(data.t, data.channels, {}, "pendulum")  # noise not given
+    result = fit(scene, data, ["length=1.2:0.1:5", "mass=2:0.1:10"], fixed=truth)
+    assert result.estimates["length"] == pytest.approx(
+        0.8, rel=3 * result.relative_errors()["length"]
+    )
+    assert result.relative_errors()["length"] < 0.01
+    assert result.not_identified() == ["mass"]
+    assert (
+        not math.isfinite(result.standard_errors["mass"]) or result.relative_errors()["mass"] > 10
+    )
+    assert result.report()["noise"] == "estimated from the residuals"
+
+
+def test_block_residuals_average_in_noise_units():
+    t = np.linspace(0, 1, 11)
+    data = Measurements(t, {"y": t**2}, {"y": 0.1})
+    cmp_ = Comparison(data, ResidualSpec("block", windows=((0.0, 0.55),), block=0.2))
+    # samples 0..5 (t <= 0.55) in blocks of 0.2 s: [0, .1], [.2, .3], [.4, .5]
+    np.testing.assert_array_equal(cmp_.counts, [2, 2, 2])
+    assert cmp_.n_save == 6 and cmp_.t_end == pytest.approx(0.5)
+    r = np.asarray(cmp_.residuals({"y": t[:6] ** 2 + 0.3}))
+    np.testing.assert_allclose(r, 0.3 / (0.1 / np.sqrt(2)))
+
+
+def test_measurement_files_round_trip(tmp_path):
+    data = Measurements(np.linspace(0, 1, 5), {"a": np.arange(5.0), "b": -np.arange(5.0)},
+                        {"a": 0.5})  # fmt: skip
+    for ext in ("csv", "npz"):
+        path = str(tmp_path / f"m.{ext}")
+        data.save(path)
+        back = load_measurements(path)
+        np.testing.assert_array_equal(back.t, data.t)
+        np.testing.assert_array_equal(back.channels["b"], data.channels["b"])
+        assert back.noise == {"a": 0.5}
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("x,y\n0,1\n1,2\n", "no time column"),
+        ("t,y\n0,1\n0,2\n", "strictly increasing"),
+        ("t,y\n0,1\n1,nan\n", "column 'y' row 1"),
+        ("t,y\n0,1\n1,2,3\n", "line 3 has 3 values"),
+        ("t,y\n0,1\n1,abc\n", "'abc' is not a number"),
+        ("t,y\n", "no data rows"),
+        ("t\n0\n1\n", "no measured channel"),
+        ("# sigma_y = -1\nt,y\n0,1\n1,2\n", "sigma_y = -1.0 is invalid"),
+        ("# sigma_z = 1\nt,y\n0,1\n1,2\n", "noise level given for 'z'"),
+        ("t,y,y\n0,1,1\n1,2,2\n", "'y' appears twice"),
+        ("t,y\n0,1\n", "at least 2 samples"),
+    ],
+)
+def test_malformed_csv_is_refused_naming_the_problem(tmp_path, text, message):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(MeasurementError, match=message):
+        load_measurements(str(path))
+
+
+def test_malformed_files_and_specs_are_refused(tmp_path, capsys):
+    with pytest.raises(MeasurementError, match="no such file"):
+        load_measurements(str(tmp_path / "missing.csv"))
+    (tmp_path / "m.txt").write_text("t,y\n")
+    with pytest.raises(MeasurementError, match="unknown format '.txt'"):
+        load_measurements(str(tmp_path / "m.txt"))
+    (tmp_path / "broken.npz").write_bytes(b"not a zip")
+    with pytest.raises(MeasurementError, match="not a readable npz"):
+        load_measurements(str(tmp_path / "broken.npz"))
+    np.savez(tmp_path / "s.npz", t=[0.0, 1.0], y=np.array(["a", "b"]))
+    with pytest.raises(MeasurementError, match="'y' is not numeric"):
+        load_measurements(str(tmp_path / "s.npz"))
+    scene = Impact()
+    with pytest.raises(ValueError, match="unknown parameter 'stifness'"):
+        make_parameters(scene, ["stifness=1e10"])
+    with pytest.raises(ValueError, match=r"restitution = 1.5 \(initial guess\) is invalid"):
+        make_parameters(scene, ["restitution=1.5:0.1:0.99"])
+    with pytest.raises(ValueError, match=r"must lie in \[0, 1\]"):
+        make_parameters(scene, ["restitution=0.5:0.1:2"])
+    with pytest.raises(ValueError, match="guess 'x' is not a number"):
+        make_parameters(scene, ["restitution=x"])
+    # Through the CLI: a channel the scene does not have, and a bad file, exit 2 with reasons.
+    data = Measurements(np.linspace(0, 1e-4, 5), {"journal_q": np.zeros(5) + 1.0})
+    data.save(str(tmp_path / "d.csv"))
+    code = main(["fit", str(tmp_path / "d.csv"), "--scene", "impact", "--params", "stiffness",
+                 "--out", str(tmp_path / "o"), "--quiet"])  # fmt: skip
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "channel 'journal_q' is not an output of scene 'impact'" in err and "journal_x" in err
+    code = main(["fit", str(tmp_path / "m.txt"), "--scene", "impact", "--params", "stiffness",
+                 "--out", str(tmp_path / "o2")])  # fmt: skip
+    assert code == 2 and "unknown format" in capsys.readouterr().err
