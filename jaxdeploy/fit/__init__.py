@@ -1,12 +1,15 @@
 """Identification: fit scene parameters to measured channels, with honest uncertainties.
 
-`load_measurements` reads CSV/npz data, `fit` runs Levenberg–Marquardt through the simulation
-(forward-mode derivatives through the generalized-α solver), `FitResult` reports estimates,
-standard errors, correlations and the loss history; `synthesize` makes noisy synthetic data
-from a scene. See docs/identification.md.
+`parameter_jacobian` differentiates any output of a run with respect to scene parameters
+(reverse or forward mode through the solver). `load_measurements` reads CSV/npz data; `fit`
+runs Levenberg–Marquardt through the simulation (forward-mode derivatives through the
+generalized-α solver); `FitResult` reports estimates, standard errors, correlations and the
+loss history; `synthesize` makes noisy synthetic data from a scene. See
+docs/identification.md.
 """
 
 from ._data import MeasurementError, Measurements, load_measurements
+from ._derivatives import output_function, parameter_jacobian
 from ._fit import FitResult, fit, levenberg_marquardt
 from ._parameters import FitParameter, make_parameters, parse_param_spec
 from ._residuals import Comparison, ResidualSpec
@@ -24,6 +27,8 @@ __all__ = [
     "load_measurements",
     "make_parameters",
     "model_channels",
+    "output_function",
+    "parameter_jacobian",
     "parse_param_spec",
     "synthesize",
 ]
