@@ -63,6 +63,7 @@ def test_impact_forward_and_reverse_mode_match_central_differences():
         np.testing.assert_allclose(fwd[name], rev[name], rtol=0, atol=1e-10 * scale, err_msg=name)
 
 
+@pytest.mark.slow  # two slider-crank compilations: ~80 s on a quiet 2-core machine
 def test_slider_crank_reverse_mode_matches_central_differences():
     """Slider-crank through its first impact (~0.25 ms): the rod and slider motion w.r.t.
     c, σ, c_e, μ and E (reverse mode, one compiled Jacobian of a vector output)."""

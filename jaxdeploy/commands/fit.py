@@ -148,6 +148,7 @@ def _progress(names):
 
 
 def run(args) -> int:
+    import os
     import time
 
     import numpy as np
@@ -158,6 +159,7 @@ def run(args) -> int:
         atomic_write_bytes,
         atomic_write_json,
         atomic_write_npz,
+        check_output_dir,
         prepare_output_dir,
         run_metadata,
     )
@@ -199,8 +201,9 @@ def run(args) -> int:
             if not value > 0:
                 return _fail(f"--{key.replace('_', '-')} = {value} is invalid: it must be > 0")
             control[key] = value
+    # Refusals happen before the folder is created and before anything is compiled.
     try:
-        prepare_output_dir(args.out, args.overwrite)
+        check_output_dir(args.out, args.overwrite)
     except FileExistsError as err:
         return _fail(str(err))
 
@@ -227,6 +230,10 @@ def run(args) -> int:
     except (RuntimeError, ValueError) as err:
         return _fail(str(err))
     wall = time.perf_counter() - start
+    prepare_output_dir(args.out, args.overwrite)
+    # fit.json is written last and marks a complete result: drop an old one first.
+    if os.path.exists(os.path.join(args.out, "fit.json")):
+        os.unlink(os.path.join(args.out, "fit.json"))
 
     report = result.report()
     report.update(
@@ -243,7 +250,6 @@ def run(args) -> int:
         wall_time_s=wall,
         versions=run_metadata(),
     )
-    atomic_write_json(f"{args.out}/fit.json", report)
     rows = ["stage,evaluation,cost,accepted,damping," + ",".join(names)]
     for h in result.history:
         rows.append(
@@ -259,6 +265,7 @@ def run(args) -> int:
         arrays[f"fitted_{n}"] = np.asarray(cmp_.features(result.model_final[n]))
     atomic_write_npz(f"{args.out}/fit.npz", **arrays)
     figures = plot_fit(result, args.out)
+    atomic_write_json(f"{args.out}/fit.json", report)
 
     width = max(len(n) for n in names)
     print(f"{'parameter':<{width}}  {'estimate':>12}  {'std. error':>11}  {'rel.':>7}")

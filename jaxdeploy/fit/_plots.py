@@ -15,15 +15,11 @@ def plot_fit(result, out_dir: str) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..io import atomic_write_bytes
+    from ..io import atomic_savefig
 
     def save(fig, name):
-        import io
-
-        buffer = io.BytesIO()
-        fig.savefig(buffer, format="png", dpi=110)
+        atomic_savefig(fig, os.path.join(out_dir, name), dpi=110)
         plt.close(fig)
-        atomic_write_bytes(os.path.join(out_dir, name), buffer.getvalue())
         return name
 
     files = []
