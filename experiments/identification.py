@@ -171,7 +171,7 @@ def main():
     lines += table(fit2, truth, "Fit 2 (not identifiable): E and ν together")
     lines += [
         "",
-        f"In fit 2 the combination the data do see is recovered: E* = "
+        f"Fit 2 estimates E* = E/(2(1 − ν²)), the only combination the contact sees, as "
         f"{estar(fit2.estimates['youngs_modulus'], fit2.estimates['poisson_ratio']):.4g} Pa "
         f"against the true {estar(truth['youngs_modulus'], truth['poisson_ratio']):.4g} Pa.",
         "",
