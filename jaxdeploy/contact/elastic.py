@@ -5,6 +5,8 @@ and whose exponent is a static field (changing it recompiles). All laws share th
 
 * `force(delta)`: elastic force `F_e(δ) ≥ 0` (N) at penetration δ (m; δ < 0 is a gap);
 * `stiffness(delta)`: `dF_e/dδ` (N/m), in closed form;
+* `potential(delta)`: elastic energy `U(δ) = ∫_{−∞}^δ F_e` (J), with `dU/dδ = F_e`, for energy
+  balances;
 * `onset_penetration()`: the δ where the force becomes non-negligible. The mechanism latches the
   impact velocity v⁻ of the damping laws there.
 """
@@ -48,6 +50,10 @@ class AbstractElasticLaw(eqx.Module):
         """Contact stiffness `dF_e/dδ` (N/m)."""
 
     @abc.abstractmethod
+    def potential(self, delta: ArrayLike) -> Array:
+        """Elastic energy stored in the contact, `U(δ) = ∫_{−∞}^δ F_e(s) ds` (J)."""
+
+    @abc.abstractmethod
     def onset_penetration(self) -> Array:
         """Penetration (m) at which the force becomes non-negligible."""
 
@@ -84,6 +90,11 @@ class HertzElastic(AbstractElasticLaw):
         """`dF_e/dδ = n K δ_+^(n−1)` (N/m)."""
         n = self.exponent
         return n * self.stiffness_coefficient * positive_power(delta, n - 1.0)
+
+    def potential(self, delta: ArrayLike) -> Array:
+        """`U = K δ_+^(n+1)/(n + 1)` (J)."""
+        n = self.exponent
+        return self.stiffness_coefficient * positive_power(delta, n + 1.0) / (n + 1.0)
 
     def onset_penetration(self) -> Array:
         """0: smooth surfaces touch at δ = 0."""
@@ -155,6 +166,17 @@ class RoughElastic(AbstractElasticLaw):
         n = self.exponent
         x = self._interference(delta)
         return n * self.stiffness_coefficient * gaussian_smoothed_power(x, self.sigma, n - 1.0)
+
+    def potential(self, delta: ArrayLike) -> Array:
+        """`U = K σ^(n+1) F_(n+1)(s0 − δ/σ)/(n + 1)` (J); `K δ_+^(n+1)/(n+1)` at σ = 0.
+
+        From `dF_(n+1)/dh = −(n+1) F_n`: `dU/dδ = K σ^n F_n(s0 − δ/σ) = F_e`.
+        """
+        n = self.exponent
+        x = self._interference(delta)
+        return (
+            self.stiffness_coefficient * gaussian_smoothed_power(x, self.sigma, n + 1.0) / (n + 1.0)
+        )
 
     def onset_penetration(self) -> Array:
         """`(s0 − 3) σ`: below it the force is < ~1e-4 of its value one σ deeper."""
