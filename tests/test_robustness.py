@@ -122,3 +122,230 @@ def test_figures_are_written_atomically(tmp_path):
     plt.close(fig)
     assert (tmp_path / "f.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert _leftovers(tmp_path) == []
+
+
+# --- extreme impacts: complete, finite, energy balance, no stall, finite gradients ------------
+
+import diffrax as dfx  # noqa: E402
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+
+from jaxdeploy import contact  # noqa: E402
+from jaxdeploy.mechanism import (  # noqa: E402
+    Body,
+    CoilSpringDrive,
+    Latch,
+    Mechanism,
+    Revolute,
+    add_clock,
+    consistent_state,
+    energy_balance,
+    metered,
+)
+from jaxdeploy.scenes import Impact  # noqa: E402
+from jaxdeploy.simulation import simulate  # noqa: E402
+
+# (clearance m, σ m, E Pa, c_e, v0 m/s): the corners of issue 8's matrix that one impact reaches.
+EXTREME_IMPACTS = [
+    (1e-6, 1e-6, 207e9, 0.9, 1.0),  # 1 µm clearance, σ as large as the clearance
+    (1e-7, 1e-8, 400e9, 0.5, 0.1),  # 0.1 µm, stiffest material
+    (1e-5, 1e-5, 1e9, 0.05, 10.0),  # softest, hardest impact, σ = c: in contact from t = 0
+    (1e-6, 1e-9, 400e9, 1.0, 10.0),  # elastic impact, σ → 0 (Hertz)
+]
+ENERGY_TOLERANCE = 2e-3  # |T + V + D − E0| / E0 over the whole run (stated in docs/robustness.md)
+
+
+def _impact_case(clearance, sigma, modulus, restitution, speed):
+    scene = Impact(damping="flores")
+    stiffness = contact.journal_bearing_stiffness(5e-3, clearance, modulus, 0.3, modulus, 0.3)
+    params = scene.resolve_params(
+        {
+            "clearance": clearance,
+            "sigma": sigma,
+            "stiffness": float(stiffness),
+            "restitution": restitution,
+            "impact_speed": speed,
+            "mass": 1.0,
+        }
+    )
+    mechanism = metered(scene.build(params))
+    return add_clock(mechanism, scene.initial_state(params, mechanism))
+
+
+def test_extreme_impacts_complete_balance_energy_and_do_not_stall():
+    cases = [_impact_case(*case) for case in EXTREME_IMPACTS]
+    mechanism = jax.tree.map(lambda *xs: jnp.stack(xs), *[m for m, _ in cases])
+    initial = jax.tree.map(lambda *xs: jnp.stack(xs), *[s for _, s in cases])
+
+    def run(mech, init):
+        traj = simulate(mech, init, 1e-3, rtol=1e-8, atol=1e-13, dt_max=1e-5, n_save=21)
+        ok = traj.result == dfx.RESULTS.successful
+        return ok, traj.q, traj.v, traj.memory, traj.stats["num_rejected_steps"]
+
+    ok, q, v, memory, rejected = jax.vmap(run)(mechanism, initial)
+    for k, case in enumerate(EXTREME_IMPACTS):
+        mech_k = cases[k][0]
+        mem_k = jax.tree.map(lambda x, k=k: x[k], memory)
+        assert bool(ok[k]), f"{case}: the solve failed"
+        assert np.all(np.isfinite(np.asarray(q[k]))) and np.all(np.isfinite(np.asarray(v[k])))
+        balance = energy_balance(mech_k, q[k], v[k], mem_k)
+        e0 = 0.5 * case[4] ** 2
+        assert float(np.max(np.abs(balance["residual"]))) <= ENERGY_TOLERANCE * e0, case
+        dissipated = np.asarray(balance["dissipated"])
+        assert dissipated[-1] >= -1e-9 * e0  # the damping law never creates energy
+        # Rebound: the journal comes back (it left the centre at +v0 along x); the gap is
+        # microns, so it then rattles in the bearing.
+        assert float(np.min(np.asarray(v[k][:, 0]))) < 0.0
+        if case[3] == 1.0:  # elastic (χ = 0): nothing dissipated, T + V stays at E0
+            assert abs(dissipated[-1]) <= 1e-12 * e0
+            stored = balance["kinetic"][-1] + balance["potential"][-1]
+            assert float(stored) == pytest.approx(e0, rel=ENERGY_TOLERANCE)
+        clock = mech_k.elements[-1]
+        log = mem_k[len(mech_k.elements) - 1]
+        assert type(clock).__name__ == "StepClock"
+        # No stall: every step at least 1e-5 of the contact's time scale, and few rejections.
+        assert float(log["min_step"][-1]) >= 1e-12
+        assert float(log["steps"][-1]) < 2e5 and int(rejected[k]) < float(log["steps"][-1])
+
+
+def _rebound_speed(params_vector):
+    """Final x-velocity of the Flores impact as a function of (c, σ, c_e, v0); starts centred."""
+    clearance, sigma, restitution, speed = params_vector
+    scene = Impact(damping="flores")
+    stiffness = contact.journal_bearing_stiffness(5e-3, clearance, 207e9, 0.3, 207e9, 0.3)
+    params = dict(scene.default_params())
+    params.update(clearance=clearance, sigma=sigma, stiffness=stiffness)
+    params.update(restitution=restitution, impact_speed=speed)
+    mechanism = scene.build(params)
+    initial = scene.initial_state(params, mechanism)
+    traj = simulate(mechanism, initial, 2e-4, rtol=1e-8, atol=1e-13, dt_max=1e-6, n_save=2)
+    return traj.v[-1, 0]
+
+
+def test_gradients_finite_from_zero_eccentricity_through_contact_onset_and_rebound():
+    """The journal starts exactly centred (e = 0), crosses the rough law's onset, impacts and
+    rebounds; the gradient with respect to every contact parameter is finite, and its signs are
+    the physical ones: a higher restitution and a faster approach give a faster rebound."""
+    x = jnp.array([1e-5, 1e-6, 0.7, 0.3])
+    grad = jax.grad(_rebound_speed)(x)
+    assert np.all(np.isfinite(np.asarray(grad))), grad
+    assert float(_rebound_speed(x)) < 0.0
+    assert float(grad[2]) < 0.0  # d(v_x)/d c_e: v_x = −(rebound speed), which grows with c_e
+    assert float(grad[3]) < 0.0  # d(v_x)/d v0
+
+
+def test_clearance_forces_have_finite_gradients_at_zero_eccentricity_and_sliding_speed():
+    law = contact.LankaraniNikravesh(contact.RoughElastic(1e10, 1e-6), 0.9)
+    friction = contact.SmoothCoulomb(0.8)
+
+    def forces(q, v, clearance):
+        from jaxdeploy.mechanism import RevoluteClearance
+
+        joint = RevoluteClearance(
+            "ground", "B", "journal", "c", clearance=clearance, journal_radius=5e-3,
+            normal=law, friction=friction,
+        )  # fmt: skip
+        body = Body("journal", 1.0, 1e-5, {"c": (0.0, 0.0)})
+        mech = Mechanism([body], [joint], {"B": (0.0, 0.0)})
+        return mech.generalized_forces(q, v, 0.0, mech.init_memory(q, v))
+
+    zero = jnp.zeros(3)
+    for q in (zero, jnp.array([1e-5, 0.0, 0.0])):  # centred; exactly at the nominal surface
+        for jac in jax.jacfwd(forces, argnums=(0, 1, 2))(q, zero, 1e-5):
+            assert np.all(np.isfinite(np.asarray(jac)))
+        for g in jax.grad(lambda q, v, c: jnp.sum(forces(q, v, c)), argnums=(0, 1, 2))(
+            q, zero, 1e-5
+        ):
+            assert np.all(np.isfinite(np.asarray(g)))
+
+
+def test_gradient_finite_across_latch_engagement():
+    """A panel driven by a coil spring swings to its latch, which engages mid-run."""
+
+    def final_angle(stiffnesses):
+        spring, latch = stiffnesses
+        panel = Body("panel", 1.0, 0.1, {"hinge": (-0.5, 0.0)})
+        mech = Mechanism(
+            [panel],
+            [
+                Revolute("ground", "O", "panel", "hinge"),
+                CoilSpringDrive("ground", "panel", stiffness=spring, free_angle=2.0),
+                Latch("ground", "panel", lock_angle=1.0, stiffness=latch, damping=5.0),
+            ],
+            {"O": (0.0, 0.0)},
+        )
+        init = consistent_state(mech, jnp.array([0.5, 0.0, 0.0]), fixed=(2,))
+        traj = simulate(mech, init, 1.5, dt=2e-3, n_save=2)
+        return traj.q[-1, 2], traj.memory[2]["engaged"][-1]
+
+    x = jnp.array([1.0, 500.0])
+    (angle, engaged) = final_angle(x)
+    assert float(engaged) == 1.0 and abs(float(angle) - 1.0) < 0.05
+    grad = jax.grad(lambda x: final_angle(x)[0])(x)
+    assert np.all(np.isfinite(np.asarray(grad)))
+    assert float(grad[1]) != 0.0  # the latch stiffness matters after engagement
+
+
+def test_potential_energies_are_the_conservative_forces():
+    """`Q(q, 0) = −∇V(q)` when nothing dissipates: gravity, springs, cubic drive, applied loads,
+    an engaged latch and a penetrating rough contact, each against its own potential."""
+    from jaxdeploy.mechanism import (
+        AppliedForce,
+        AppliedTorque,
+        Gravity,
+        RevoluteClearance,
+        RotationalSpring,
+        Spring,
+    )
+
+    a = Body("a", 2.0, 0.1, {"p": (0.3, 0.1), "pin": (-0.2, 0.0)})
+    b = Body("b", 1.0, 0.05, {"p": (-0.1, 0.2), "hole": (0.1, 0.0)})
+    elastic = contact.RoughElastic(1e9, 2e-6, offset=1.0)
+    elements = [
+        Gravity((0.3, -9.81)),
+        Spring("ground", "S", "a", "p", stiffness=50.0, rest_length=0.4),
+        RotationalSpring("a", "b", stiffness=3.0, rest_angle=0.2),
+        CoilSpringDrive("ground", "a", stiffness=2.0, free_angle=1.5, cubic_stiffness=0.7),
+        AppliedTorque("b", 0.4),
+        AppliedForce("b", "p", (1.0, -2.0)),
+        Latch("a", "b", lock_angle=0.1, stiffness=40.0),
+        RevoluteClearance(
+            "b",
+            "hole",
+            "a",
+            "pin",
+            clearance=1e-5,
+            journal_radius=5e-3,
+            normal=contact.Undamped(elastic),
+        ),  # fmt: skip
+    ]
+    mech = Mechanism([a, b], elements, {"S": (1.0, 1.0)})
+    # b's hole sits 13 µm from a's pin: 3 µm past the nominal clearance.
+    q = jnp.array([0.1, 0.2, 0.3, 0.0, 0.0, 0.5])
+    pin = mech.kinematics(q).position("a", "pin")
+    hole_offset = mech.kinematics(q).position("b", "hole") - q[3:5]
+    q = q.at[3:5].set(pin + jnp.array([13e-6, 0.0]) - hole_offset)
+    memory = list(mech.init_memory(q, jnp.zeros(6)))
+    memory[6] = {"engaged": jnp.asarray(1.0)}
+    memory = tuple(memory)
+    forces = mech.generalized_forces(q, jnp.zeros(6), 0.0, memory)
+    grad_v = jax.grad(mech.potential_energy)(q, memory)
+    np.testing.assert_allclose(np.asarray(forces), -np.asarray(grad_v), rtol=1e-10, atol=1e-9)
+    assert float(elements[-1].potential_energy(mech.kinematics(q), None)) > 0.0
+
+
+def test_energy_meter_does_not_change_the_dynamics():
+    scene = Impact(damping="hunt_crossley")
+    params = scene.resolve_params({"restitution": 0.6})
+    plain = scene.build(params)
+    wrapped = metered(plain)
+    runs = [
+        simulate(m, scene.initial_state(params, m), 6e-4, dt=2e-6, n_save=5)
+        for m in (plain, wrapped)
+    ]
+    np.testing.assert_array_equal(np.asarray(runs[0].q), np.asarray(runs[1].q))
+    balance = energy_balance(wrapped, runs[1].q, runs[1].v, runs[1].memory)
+    # Hunt–Crossley with c_e = 0.6: the energy lost is (1 − c_eff²) E0, c_eff ≈ c_e.
+    lost = float(balance["dissipated"][-1]) / 0.5
+    rebound = -float(runs[1].v[-1, 0])
+    assert lost == pytest.approx(1.0 - rebound**2, abs=2e-3)

@@ -14,6 +14,7 @@ from .forces import (
     Spring,
 )
 from .joints import AngleDriver, Prismatic, Revolute, Weld
+from .meters import EnergyMeter, StepClock, add_clock, energy_balance, metered, step_log
 from .system import Mechanism
 
 __all__ = [
@@ -25,6 +26,8 @@ __all__ = [
     "AssemblyError",
     "Body",
     "CoilSpringDrive",
+    "EnergyMeter",
+    "StepClock",
     "ConsistentState",
     "Gravity",
     "Kinematics",
@@ -37,5 +40,9 @@ __all__ = [
     "Spring",
     "Weld",
     "Wrench",
+    "add_clock",
     "consistent_state",
+    "energy_balance",
+    "metered",
+    "step_log",
 ]

@@ -16,8 +16,13 @@ joint (e = 0) differentiable.
 Memory (only for laws that need the impact velocity v⁻): `in_contact` and `impact_velocity`.
 During a step that starts out of contact, v⁻ is the approach speed δ̇ at the step's start
 (the speed just before impact); once in contact it is held until the surfaces separate, as in
-Flores & Ambrósio (2010). "In contact" means δ beyond the elastic law's onset (0 for Hertz,
-about (s0 − 3)σ for the rough law).
+Flores & Ambrósio (2010), except that it rises to any larger approach speed met during the
+contact: v⁻ is the largest approach speed of the current contact. In an ordinary impact the
+approach decelerates from v⁻ and nothing changes; but a contact that starts at rest (a centred
+journal whose rough law is already past its onset, σ ≳ c/3, has δ̇ = 0 at t = 0) and is then
+driven in would otherwise keep v⁻ = 0, i.e. the floor `VELOCITY_FLOOR`, and a damping term
+χ δ̇/v⁻ thousands of times too large (it captured a 10 m/s impact). "In contact" means δ
+beyond the elastic law's onset (0 for Hertz, about (s0 − 3)σ for the rough law).
 """
 
 from __future__ import annotations
@@ -124,7 +129,9 @@ class RevoluteClearance(AbstractElement):
         held = memory["in_contact"] > 0.5
         return {
             "in_contact": memory["in_contact"],
-            "impact_velocity": jnp.where(held, memory["impact_velocity"], approach),
+            "impact_velocity": jnp.where(
+                held, jnp.maximum(memory["impact_velocity"], approach), approach
+            ),
         }
 
     def memory_after_step(self, memory, kin: Kinematics):
@@ -151,6 +158,10 @@ class RevoluteClearance(AbstractElement):
             Wrench(self.journal_body, force=f_journal, point=g.contact_point_journal),
             Wrench(self.bearing_body, force=-f_journal, point=g.contact_point_bearing),
         ]
+
+    def potential_energy(self, kin: Kinematics, memory):
+        """Elastic energy of the contact, `U(δ)` of the normal law's elastic part."""
+        return self.normal.elastic.potential(self.geometry(kin).penetration)
 
     def idealized(self) -> Revolute:
         return Revolute(

@@ -34,7 +34,9 @@ class AbstractElement(eqx.Module):
     - `wrenches(kin, t, memory)` for forces;
     - `has_memory`, `init_memory`, `memory_for_step`, `memory_after_step` for state that
       changes between steps only (it is held fixed while Newton solves a step, which keeps the
-      step's residual smooth).
+      step's residual smooth);
+    - `potential_energy(kin, memory)` for the conservative part of their forces (energy
+      balances, `mechanism/energy.py`).
     """
 
     n_constraints: ClassVar[int] = 0
@@ -45,6 +47,11 @@ class AbstractElement(eqx.Module):
 
     def wrenches(self, kin: Kinematics, t, memory) -> list[Wrench]:
         return []
+
+    def potential_energy(self, kin: Kinematics, memory) -> Array:
+        """Energy `V` (J) whose gradient gives the element's conservative force, `Q = −∇_q V`;
+        0 for elements that store none (ideal joints, pure dampers)."""
+        return jnp.zeros((), dtype=kin.q.dtype)
 
     def bodies(self) -> tuple[str, ...]:
         """Names of the bodies this element touches (for validation)."""

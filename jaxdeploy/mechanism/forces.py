@@ -28,6 +28,11 @@ class Gravity(AbstractElement):
     def wrenches(self, kin: Kinematics, t, memory):
         return [Wrench(body=b.name, force=b.mass * self.acceleration) for b in kin.mechanism.bodies]
 
+    def potential_energy(self, kin: Kinematics, memory):
+        """`V = −Σ m_k g·r_k`."""
+        g = jnp.asarray(self.acceleration)
+        return -sum(b.mass * jnp.dot(g, kin.origin(b.name)) for b in kin.mechanism.bodies)
+
 
 class Spring(AbstractElement):
     """Linear point-to-point spring–damper between `point_a` of `body_a` and `point_b` of `body_b`.
@@ -63,6 +68,12 @@ class Spring(AbstractElement):
             Wrench(self.body_b, force=-f, point=pb),
         ]
 
+    def potential_energy(self, kin: Kinematics, memory):
+        """`V = ½ k (ℓ − ℓ₀)²`."""
+        d = kin.position(self.body_b, self.point_b) - kin.position(self.body_a, self.point_a)
+        stretch = jnp.sqrt(jnp.dot(d, d) + 1e-30) - self.rest_length
+        return 0.5 * self.stiffness * stretch**2
+
     def bodies(self):
         return (self.body_a, self.body_b)
 
@@ -95,6 +106,11 @@ class RotationalSpring(AbstractElement):
     def wrenches(self, kin: Kinematics, t, memory):
         alpha, rate = relative_angle(kin, self.body_a, self.body_b, self.rest_angle)
         return _torque_pair(self.body_a, self.body_b, -self.stiffness * alpha - self.damping * rate)
+
+    def potential_energy(self, kin: Kinematics, memory):
+        """`V = ½ k (α − α₀)²`."""
+        alpha, _ = relative_angle(kin, self.body_a, self.body_b, self.rest_angle)
+        return 0.5 * self.stiffness * alpha**2
 
     def bodies(self):
         return (self.body_a, self.body_b)
@@ -129,6 +145,11 @@ class CoilSpringDrive(AbstractElement):
         torque = self.stiffness * wind + self.cubic_stiffness * wind**3
         return _torque_pair(self.body_a, self.body_b, torque)
 
+    def potential_energy(self, kin: Kinematics, memory):
+        """`V = ½ k (α₀ − α)² + ¼ k₃ (α₀ − α)⁴` (so that `M = −dV/dα`)."""
+        wind = self.free_angle - self.hinge_angle(kin)
+        return 0.5 * self.stiffness * wind**2 + 0.25 * self.cubic_stiffness * wind**4
+
     def bodies(self):
         return (self.body_a, self.body_b)
 
@@ -141,6 +162,10 @@ class AppliedTorque(AbstractElement):
 
     def wrenches(self, kin: Kinematics, t, memory):
         return [Wrench(self.body, torque=self.torque)]
+
+    def potential_energy(self, kin: Kinematics, memory):
+        """`V = −τ θ` (a constant torque is conservative)."""
+        return -self.torque * kin.angle(self.body)
 
     def bodies(self):
         return (self.body,)
@@ -155,6 +180,10 @@ class AppliedForce(AbstractElement):
 
     def wrenches(self, kin: Kinematics, t, memory):
         return [Wrench(self.body, force=self.force, point=kin.position(self.body, self.point))]
+
+    def potential_energy(self, kin: Kinematics, memory):
+        """`V = −f·r_P` (a constant force is conservative)."""
+        return -jnp.dot(jnp.asarray(self.force), kin.position(self.body, self.point))
 
     def bodies(self):
         return (self.body,)
@@ -202,6 +231,12 @@ class Latch(AbstractElement):
         alpha, rate = self._angle(kin)
         torque = -self.stiffness * (alpha - self.lock_angle) - self.damping * rate
         return _torque_pair(self.body_a, self.body_b, memory["engaged"] * torque)
+
+    def potential_energy(self, kin: Kinematics, memory):
+        """`V = ½ k_L (α − α_L)²` once engaged, 0 before. Engaging at an overshoot `α − α_L`
+        puts `½ k_L (α − α_L)²` into the latch at once: energy the discrete engagement adds."""
+        alpha, _ = self._angle(kin)
+        return memory["engaged"] * 0.5 * self.stiffness * (alpha - self.lock_angle) ** 2
 
     def bodies(self):
         return (self.body_a, self.body_b)

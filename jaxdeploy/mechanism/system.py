@@ -202,4 +202,13 @@ class Mechanism(eqx.Module):
         return sol[:n], sol[n:]
 
     def kinetic_energy(self, v) -> Array:
+        """`T = ½ q̇ᵀ M q̇` (J)."""
         return 0.5 * jnp.sum(self.mass_diagonal() * v**2)
+
+    def potential_energy(self, q, memory) -> Array:
+        """`V = Σ_e V_e(q)` (J): gravity, springs, drive, latch, contact elastic energy."""
+        kin = self.kinematics(q)
+        total = jnp.zeros((), dtype=q.dtype)
+        for element, mem in zip(self.elements, memory, strict=True):
+            total = total + element.potential_energy(kin, mem)
+        return total

@@ -1,0 +1,226 @@
+"""Instruments for simulated runs: energy bookkeeping (`EnergyMeter`, `metered`,
+`energy_balance`) and a step-size log (`StepClock`, `add_clock`).
+
+**Energy.**
+The balance of a mechanism whose ideal joints are scleronomic (no driving constraints):
+
+    T(t) + V(t) + D(t) = T(0) + V(0) + J(t)
+
+with `T = ½ q̇ᵀ M q̇`, `V = Σ_e V_e(q)` (`AbstractElement.potential_energy`), `D = Σ_e D_e` the
+energy dissipated by the non-conservative part of each element's force,
+
+    D_e(t) = −∫ Q_e^nc · dq,    Q_e^nc = Q_e(q, q̇) + ∇_q V_e(q),
+
+and `J` the energy that memory updates put into potentials (a latch engaging at an overshoot
+`α − α_L` stores `½ k_L (α − α_L)²` at once). Ideal joints do no work on a scleronomic
+mechanism.
+
+`D_e` is metered *inside* the simulation by `EnergyMeter`, a wrapper element whose memory
+integrates `Q_e^nc · dq` by the trapezoidal rule over each accepted step (forces at the step's
+start and end, displacement `q_{n+1} − q_n`): exact to O(h³) per step, whatever the integrator,
+and blind to the solver's own (numerical) dissipation — which therefore shows up, with the
+integrator's energy error, as the balance residual `T + V + D − T(0) − V(0) − J`.
+The meter does not change the dynamics: memory is updated between steps only.
+
+**Steps.** `add_clock` adds a free body `"clock"` (no forces, unit velocity along x, so its x
+coordinate is the time, exactly for any integrator that is exact on constant velocity) and a
+`StepClock` element whose memory logs the smallest and largest accepted step and counts them.
+It is an instrument: it adds three coordinates whose error estimate is zero, which scales an
+RMS error norm by sqrt(n/(n+3)) — say so when reporting steps taken with it.
+
+Reference: the work–energy theorem for constrained systems, e.g. Géradin & Cardona, *Flexible
+Multibody Dynamics* (2001), §6.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import jax
+import jax.numpy as jnp
+
+from .assembly import ConsistentState
+from .bodies import Body, Kinematics
+from .element import AbstractElement
+from .system import Mechanism
+
+CLOCK = "clock"
+
+
+class EnergyMeter(AbstractElement):
+    """`inner` unchanged, plus a memory that meters the energy its non-conservative forces
+    dissipate (`dissipated`) and the energy memory updates put into its potential
+    (`injected`). Forces are evaluated at t = 0 in the meter (no element force depends on t).
+
+    **Arguments:** `inner`: a force element (no constraints).
+    """
+
+    inner: AbstractElement
+    has_memory: ClassVar[bool] = True
+
+    def __check_init__(self):
+        if self.inner.n_constraints:
+            raise ValueError(
+                f"EnergyMeter meters force elements; {type(self.inner).__name__} is a constraint"
+            )
+
+    def bodies(self):
+        return self.inner.bodies()
+
+    def wrenches(self, kin: Kinematics, t, memory):
+        return self.inner.wrenches(kin, t, memory["inner"])
+
+    def potential_energy(self, kin: Kinematics, memory):
+        return self.inner.potential_energy(kin, memory["inner"])
+
+    def idealized(self):
+        # A clearance joint idealizes to a revolute joint, which does no work: no meter.
+        ideal = self.inner.idealized()
+        return ideal if ideal.n_constraints else EnergyMeter(ideal)
+
+    # --- metering -------------------------------------------------------------------------
+
+    def _inner_memory(self, method, memory, kin):
+        return getattr(self.inner, method)(memory, kin) if self.inner.has_memory else memory
+
+    def _nonconservative_force(self, kin: Kinematics, inner_memory):
+        """`Q_e + ∇_q V_e` at `kin`, with the inner element's memory."""
+        alone = Mechanism(kin.mechanism.bodies, [self.inner], kin.mechanism.ground_points)
+        forces = alone.generalized_forces(kin.q, kin.v, 0.0, (inner_memory,))
+        grad_v = jax.grad(lambda q: self.inner.potential_energy(Kinematics(alone, q), inner_memory))
+        return forces + grad_v(kin.q)
+
+    def _jump(self, kin, before, after):
+        return self.inner.potential_energy(kin, after) - self.inner.potential_energy(kin, before)
+
+    def init_memory(self, kin: Kinematics):
+        inner = self.inner.init_memory(kin) if self.inner.has_memory else None
+        zero = jnp.zeros((), dtype=kin.q.dtype)
+        return {
+            "inner": inner,
+            "q_start": kin.q,
+            "force_start": jnp.zeros_like(kin.q),
+            "dissipated": zero,
+            "injected": zero,
+        }
+
+    def memory_for_step(self, memory, kin: Kinematics):
+        inner = self._inner_memory("memory_for_step", memory["inner"], kin)
+        return {
+            "inner": inner,
+            "q_start": kin.q,
+            "force_start": self._nonconservative_force(kin, inner),
+            "dissipated": memory["dissipated"],
+            "injected": memory["injected"] + self._jump(kin, memory["inner"], inner),
+        }
+
+    def memory_after_step(self, memory, kin: Kinematics):
+        step_memory = memory["inner"]
+        force_end = self._nonconservative_force(kin, step_memory)
+        work = 0.5 * jnp.dot(memory["force_start"] + force_end, kin.q - memory["q_start"])
+        inner = self._inner_memory("memory_after_step", step_memory, kin)
+        return {
+            "inner": inner,
+            "q_start": memory["q_start"],
+            "force_start": memory["force_start"],
+            "dissipated": memory["dissipated"] - work,
+            "injected": memory["injected"] + self._jump(kin, step_memory, inner),
+        }
+
+
+def metered(mechanism: Mechanism) -> Mechanism:
+    """`mechanism` with every force element wrapped in an `EnergyMeter` (same dynamics)."""
+    elements = [e if e.n_constraints else EnergyMeter(e) for e in mechanism.elements]
+    return Mechanism(mechanism.bodies, elements, mechanism.ground_points)
+
+
+class StepClock(AbstractElement):
+    """Logs accepted steps through the `"clock"` body's x coordinate (= t); see `add_clock`.
+
+    Memory: `t_start`, `min_step`, `max_step`, `steps` (accepted steps).
+    """
+
+    has_memory: ClassVar[bool] = True
+
+    def bodies(self):
+        return (CLOCK,)
+
+    def _time(self, kin):
+        return kin.origin(CLOCK)[0]
+
+    def init_memory(self, kin: Kinematics):
+        t = self._time(kin)
+        return {"t_start": t, "min_step": jnp.inf + 0 * t, "max_step": 0 * t, "steps": 0 * t}
+
+    def memory_for_step(self, memory, kin: Kinematics):
+        return {**memory, "t_start": self._time(kin)}
+
+    def memory_after_step(self, memory, kin: Kinematics):
+        h = self._time(kin) - memory["t_start"]
+        return {
+            "t_start": memory["t_start"],
+            "min_step": jnp.minimum(memory["min_step"], h),
+            "max_step": jnp.maximum(memory["max_step"], h),
+            "steps": memory["steps"] + 1.0,
+        }
+
+
+def add_clock(mechanism: Mechanism, state: ConsistentState, t0=0.0):
+    """`(mechanism + clock, state + clock)`: the clock body starts at x = t0 with unit speed.
+
+    **Returns:** the extended mechanism and its consistent state (memory re-initialised).
+    """
+    clock = Body(CLOCK, 1.0, 1.0)
+    extended = Mechanism(
+        (*mechanism.bodies, clock), (*mechanism.elements, StepClock()), mechanism.ground_points
+    )
+    dtype = state.q.dtype
+    q = jnp.concatenate([state.q, jnp.array([t0, 0.0, 0.0], dtype=dtype)])
+    v = jnp.concatenate([state.v, jnp.array([1.0, 0.0, 0.0], dtype=dtype)])
+    qdd = jnp.concatenate([state.qdd, jnp.zeros(3, dtype=dtype)])
+    return extended, ConsistentState(q, v, qdd, state.lam, extended.init_memory(q, v))
+
+
+def step_log(mechanism: Mechanism, memory) -> dict:
+    """`{min_step, max_step, steps}` at the last saved state of a clocked run (floats)."""
+    (index,) = [i for i, e in enumerate(mechanism.elements) if isinstance(e, StepClock)]
+    log = memory[index]
+    return {k: float(log[k][-1]) for k in ("min_step", "max_step", "steps")}
+
+
+def energy_balance(mechanism: Mechanism, q, v, memory) -> dict:
+    """Energy terms along saved states of a `metered` mechanism.
+
+    **Arguments:** `mechanism` (from `metered`), saved `q`, `v` (N, n) and `memory` (leading
+    axis N), e.g. a `Trajectory`'s fields.
+
+    **Returns:** arrays over the N saved states: `kinetic` T, `potential` V, `dissipated` D,
+    `injected` J, `residual` `T + V + D − T(0) − V(0) − J`, and per element index
+    `dissipated_by` / `potential_of` / `injected_by` (dicts over element index). A clock
+    body's kinetic energy is left out.
+    """
+    meters = [i for i, e in enumerate(mechanism.elements) if isinstance(e, EnergyMeter)]
+
+    def at(q, v, memory):
+        kin = mechanism.kinematics(q, v)
+        potentials = {i: mechanism.elements[i].potential_energy(kin, memory[i]) for i in meters}
+        moving = jnp.asarray([b.name != CLOCK for b in mechanism.bodies for _ in range(3)])
+        return {
+            "kinetic": mechanism.kinetic_energy(jnp.where(moving, v, 0.0)),
+            "potential_of": potentials,
+            "dissipated_by": {i: memory[i]["dissipated"] for i in meters},
+            "injected_by": {i: memory[i]["injected"] for i in meters},
+        }
+
+    out = jax.vmap(at)(q, v, memory)
+    potential = sum(out["potential_of"].values(), jnp.zeros_like(out["kinetic"]))
+    dissipated = sum(out["dissipated_by"].values(), jnp.zeros_like(out["kinetic"]))
+    injected = sum(out["injected_by"].values(), jnp.zeros_like(out["kinetic"]))
+    total = out["kinetic"] + potential + dissipated
+    out.update(
+        potential=potential,
+        dissipated=dissipated,
+        injected=injected,
+        residual=total - total[0] - (injected - injected[0]),
+    )
+    return out
