@@ -1,0 +1,406 @@
+"""Extreme-case matrix (issue 8): does every run finish, stay finite, balance its energy, agree
+with a tighter solve (and with the diffrax path when it exists), take sane steps, and give
+finite derivatives?
+
+Two families, varied one parameter at a time around a base case:
+
+* **impact** — a 1 kg journal (R_j = 5 mm) starting centred (e = 0) in a fixed bearing, rough
+  law (σ > 0) or Hertz (σ = 0), Flores damping, 2 ms (first impact and the rattling after it).
+  Base: c = 10 µm, σ = 1 µm, E = 207 GPa (steel, ν = 0.3), c_e = 0.9, v0 = 1 m/s.
+* **deploy** — the `deploy_array` scene, 0.7 s (unfolding, latch at 0.54 s, post-lock flutter),
+  both clearance joints changed together; and the base case over 20 s.
+
+Per case: solver status (time and reason if it failed), all states finite, energy-balance
+residual max|T + V + D − E0 − J| / E_moved (`jaxdeploy.mechanism.energy_balance`, dissipation
+metered inside the run), accepted/rejected steps and the smallest/largest accepted step
+(`add_clock`), difference to the same run at rtol/10 (impact: rtol/100), and a forward-mode
+directional derivative of the outputs along every parameter at once (finite iff no partial
+derivative is NaN/inf).
+
+Results go to `results/robustness/<family>.json` (one record per case, written atomically as
+they finish); `python experiments/robustness.py docs` writes `docs/robustness.md` from them.
+
+Usage: `python experiments/robustness.py impact|deploy|long|docs|all`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import sys
+import time
+
+import diffrax as dfx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxdeploy import contact
+from jaxdeploy.io import atomic_write_bytes, atomic_write_json, run_metadata
+from jaxdeploy.mechanism import add_clock, energy_balance, metered, step_log
+from jaxdeploy.scenes import DeployArray, Impact
+from jaxdeploy.simulation import simulate
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RESULTS = os.path.join(ROOT, "results", "robustness")
+DOC = os.path.join(ROOT, "docs", "robustness.md")
+
+ENERGY_TOL = 2e-3  # stated acceptance: |residual| ≤ 0.2 % of the energy that moved
+AGREE_TOL = 1e-2  # outputs at rtol and rtol/10 agree to 1 % of their scale
+
+# --- impact family -----------------------------------------------------------------------------
+
+IMPACT_BASE = dict(clearance=1e-5, sigma=1e-6, modulus=207e9, restitution=0.9, speed=1.0)
+IMPACT_CASES = [
+    ("base", {}),
+    ("c = 1 µm", {"clearance": 1e-6}),
+    ("c = 0.1 µm", {"clearance": 1e-7}),
+    ("c = 0.01 µm", {"clearance": 1e-8}),
+    ("σ = 0 (Hertz)", {"sigma": 0.0}),
+    ("σ = 10 µm", {"sigma": 1e-5}),
+    ("σ = 10 µm, c = 1 µm", {"sigma": 1e-5, "clearance": 1e-6}),
+    ("E = 1 GPa", {"modulus": 1e9}),
+    ("E = 400 GPa", {"modulus": 400e9}),
+    ("c_e = 0.05", {"restitution": 0.05}),
+    ("c_e = 1", {"restitution": 1.0}),
+    ("v0 = 10 m/s", {"speed": 10.0}),
+    ("v0 = 10 m/s, E = 1 GPa, c_e = 0.05", {"speed": 10.0, "modulus": 1e9, "restitution": 0.05}),
+    ("v0 = 10 m/s, E = 400 GPa, c = 1 µm", {"speed": 10.0, "modulus": 400e9, "clearance": 1e-6}),
+    ("v0 = 1 cm/s", {"speed": 0.01}),
+]
+IMPACT_T_END = 2e-3
+IMPACT_CONTROL = dict(rtol=1e-8, atol=1e-13, dt_max=1e-5)
+
+
+def impact_params(case):
+    p = {**IMPACT_BASE, **case}
+    scene = Impact(damping="flores")
+    stiffness = contact.journal_bearing_stiffness(
+        5e-3, p["clearance"], p["modulus"], 0.3, p["modulus"], 0.3
+    )
+    params = scene.resolve_params(
+        {
+            "clearance": p["clearance"],
+            "sigma": p["sigma"],
+            "stiffness": float(stiffness),
+            "restitution": p["restitution"],
+            "impact_speed": p["speed"],
+        }
+    )
+    return scene, params
+
+
+def impact_outputs(traj):
+    """Final journal position and velocity along x."""
+    return jnp.stack([traj.q[-1, 0], traj.v[-1, 0]])
+
+
+# --- deploy_array family -----------------------------------------------------------------------
+
+DEPLOY_CASES = [
+    ("base (c 50 µm, Ra 1.6 µm, μ 0.05)", {}),
+    ("c = 1 µm", {"panel1_clearance": 1e-6, "panel2_clearance": 1e-6}),
+    ("σ = 10 µm", {"panel1_ra": 1e-5 / 1.2533141373155, "panel2_ra": 1e-5 / 1.2533141373155}),
+    ("σ = 0 (Hertz)", {"panel1_ra": 0.0, "panel2_ra": 0.0}),
+    ("E = 1 GPa", {"youngs_modulus": 1e9}),
+    ("E = 400 GPa", {"youngs_modulus": 400e9}),
+    ("c_e = 0.05", {"restitution": 0.05}),
+    ("c_e = 1", {"restitution": 1.0}),
+    ("μ = 0", {"friction_coefficient": 0.0}),
+    ("μ = 0.8", {"friction_coefficient": 0.8}),
+    ("spring preload ×10", {"spring_stiffness": None}),  # filled below: 10 × default
+]
+DEPLOY_T_END = 0.7
+LONG_T_END = 20.0
+
+
+def deploy_params(case):
+    scene = DeployArray()
+    case = dict(case)
+    if "spring_stiffness" in case:
+        case["spring_stiffness"] = 10.0 * scene.default_params()["spring_stiffness"]
+    return scene, scene.resolve_params(case)
+
+
+def deploy_outputs(traj):
+    """Deployment angle at the saved times (panel 1 is the first body)."""
+    return 0.5 * jnp.pi - traj.q[:, 2]
+
+
+# --- one case ----------------------------------------------------------------------------------
+
+
+def run_case(scene, params, t_end, control, outputs, n_save, gradient=True):
+    record = {"params": {k: float(v) for k, v in params.items()}}
+    mech = metered(scene.build(params))
+    init = scene.initial_state(params, mech)
+    mech, init = add_clock(mech, init)
+    start = time.perf_counter()
+    traj = simulate(mech, init, t_end, n_save=n_save, **control)
+    traj.q.block_until_ready()
+    record["wall_s"] = time.perf_counter() - start
+    record["status"] = traj.status()
+    finite = bool(np.all(np.isfinite(np.asarray(traj.q))) and np.all(np.isfinite(traj.v)))
+    record["finite"] = finite
+    record["steps"] = int(traj.stats["num_accepted_steps"])
+    record["rejected"] = int(traj.stats["num_rejected_steps"])
+    record.update(step_log(mech, traj.memory))
+    if finite:
+        balance = energy_balance(mech, traj.q, traj.v, traj.memory)
+        moved = float(
+            np.max(np.asarray(balance["kinetic"]) + np.asarray(balance["dissipated"]))
+            + np.max(np.abs(np.asarray(balance["injected"])))
+        )
+        record["energy_moved_J"] = moved
+        record["energy_residual_J"] = float(np.max(np.abs(np.asarray(balance["residual"]))))
+        record["energy_residual_rel"] = record["energy_residual_J"] / moved
+        record["dissipated_J"] = float(balance["dissipated"][-1])
+        record["injected_J"] = float(balance["injected"][-1])
+    # Same run, tighter tolerance (the plain mechanism: the meters do not change dynamics).
+    plain = scene.build(params)
+    plain_init = scene.initial_state(params, plain)
+    tight = dict(control, rtol=control["rtol"] / 10)
+    if "atol" in tight:
+        tight["atol"] = control["atol"] / 10
+    ref = simulate(plain, plain_init, t_end, n_save=n_save, **tight)
+    record["ref_status"] = ref.status()
+    a = np.asarray(outputs(traj))
+    b = np.asarray(outputs(ref))
+    scale = max(float(np.max(np.abs(b))), 1e-300)
+    record["ref_difference_rel"] = float(np.max(np.abs(a - b)) / scale)
+    record["diffrax"] = diffrax_comparison(plain, plain_init, t_end, control, outputs, n_save, b)
+    if gradient:
+        record.update(directional_derivative(scene, params, t_end, control, outputs, n_save))
+    return record
+
+
+def diffrax_comparison(mech, init, t_end, control, outputs, n_save, reference):
+    """The same run with the diffrax implicit path (issue 5), if this jaxdeploy has it."""
+    try:
+        from jaxdeploy.solvers import solver_by_name  # noqa: F401
+    except ImportError:
+        return {"status": "not available in this jaxdeploy (issue 5 not merged)"}
+    traj = simulate(mech, init, t_end, n_save=n_save, solver="kvaerno5", **control)
+    out = np.asarray(outputs(traj))
+    scale = max(float(np.max(np.abs(reference))), 1e-300)
+    return {
+        "status": traj.status(),
+        "difference_rel": float(np.max(np.abs(out - reference)) / scale),
+        "steps": int(traj.stats["num_accepted_steps"]),
+    }
+
+
+def directional_derivative(scene, params, t_end, control, outputs, n_save):
+    """Forward-mode derivative of the outputs along `p_k → p_k (1 + s)` for every nonzero
+    parameter at once (parameters that are exactly 0 stay Python floats: they select what is
+    traced). Finite iff no partial derivative is NaN or inf."""
+    names = [k for k, v in params.items() if float(v) != 0.0]
+    base = jnp.asarray([float(params[k]) for k in names])
+
+    def f(s):
+        p = dict(params)
+        p.update({k: base[i] * (1.0 + s) for i, k in enumerate(names)})
+        mech = scene.build(p)
+        init = scene.initial_state(p, mech)
+        traj = simulate(mech, init, t_end, n_save=n_save, adjoint=dfx.ForwardMode(), **control)
+        return outputs(traj)
+
+    start = time.perf_counter()
+    _, tangent = jax.jvp(f, (jnp.zeros(()),), (jnp.ones(()),))
+    tangent = np.asarray(tangent)
+    return {
+        "gradient_finite": bool(np.all(np.isfinite(tangent))),
+        "gradient_max_abs": float(np.max(np.abs(tangent))),
+        "gradient_wall_s": time.perf_counter() - start,
+    }
+
+
+# --- driver ------------------------------------------------------------------------------------
+
+
+def _save(family, records):
+    atomic_write_json(os.path.join(RESULTS, f"{family}.json"), records)
+
+
+def _load(family):
+    path = os.path.join(RESULTS, f"{family}.json")
+    if not os.path.exists(path):
+        return {}
+    with open(path) as fh:
+        return json.load(fh)
+
+
+def run_family(family):
+    records = _load(family)
+    records.setdefault("_meta", {"versions": run_metadata(), "machine": platform.machine()})
+    if family == "impact":
+        cases = [(n, c, impact_params, IMPACT_T_END, IMPACT_CONTROL, impact_outputs, 201)
+                 for n, c in IMPACT_CASES]  # fmt: skip
+    elif family == "deploy":
+        control = dict(DeployArray.default_control)
+        cases = [(n, c, deploy_params, DEPLOY_T_END, control, deploy_outputs, 201)
+                 for n, c in DEPLOY_CASES]  # fmt: skip
+    else:
+        control = dict(DeployArray.default_control)
+        cases = [("base, 20 s", {}, deploy_params, LONG_T_END, control, deploy_outputs, 2001)]
+    for name, case, make, t_end, control, outputs, n_save in cases:
+        if name in records:
+            continue
+        scene, params = make(case)
+        print(f"[{family}] {name} ...", flush=True)
+        try:
+            rec = run_case(scene, params, t_end, control, outputs, n_save, family != "long")
+        except Exception as err:  # report, never hide: the table shows the exception
+            rec = {"status": f"exception: {type(err).__name__}: {err}", "finite": False}
+        rec["t_end"] = t_end
+        records[name] = rec
+        _save(family, records)
+        print(json.dumps(rec, default=str)[:400], flush=True)
+    return records
+
+
+def _fmt(x, spec=".2e"):
+    if x is None:
+        return "—"
+    if isinstance(x, bool):
+        return "yes" if x else "**NO**"
+    if isinstance(x, float | int):
+        return format(x, spec)
+    return str(x)
+
+
+def _table(records):
+    head = (
+        "| case | status | finite | steps (rejected) | min / max step [s] | energy residual "
+        "/ moved | Δ vs tighter tol | d/ds finite | diffrax path | wall [s] |\n"
+        "|---|---|---|---|---|---|---|---|---|---|\n"
+    )
+    rows = []
+    for name, r in records.items():
+        if name.startswith("_"):
+            continue
+        diffrax_txt = r.get("diffrax", {}).get("status", "—")
+        if "difference_rel" in r.get("diffrax", {}):
+            diffrax_txt = f"{r['diffrax']['status']}, Δ {r['diffrax']['difference_rel']:.1e}"
+        rows.append(
+            f"| {name} | {r.get('status')} | {_fmt(r.get('finite'))} | "
+            f"{r.get('steps', '—')} ({r.get('rejected', '—')}) | "
+            f"{_fmt(r.get('min_step'), '.1e')} / {_fmt(r.get('max_step'), '.1e')} | "
+            f"{_fmt(r.get('energy_residual_rel'), '.1e')} | "
+            f"{_fmt(r.get('ref_difference_rel'), '.1e')} | {_fmt(r.get('gradient_finite'))} | "
+            f"{diffrax_txt} | {_fmt(r.get('wall_s'), '.0f')} |"
+        )
+    return head + "\n".join(rows) + "\n"
+
+
+def _verdict(records):
+    cases = {k: r for k, r in records.items() if not k.startswith("_")}
+    bad_status = [k for k, r in cases.items() if r.get("status") != "ok"]
+    bad_energy = [k for k, r in cases.items() if r.get("energy_residual_rel", 1.0) > ENERGY_TOL]
+    bad_ref = [k for k, r in cases.items() if r.get("ref_difference_rel", 0.0) > AGREE_TOL]
+    bad_grad = [k for k, r in cases.items() if r.get("gradient_finite") is False]
+    worst = max((r.get("energy_residual_rel", 0.0) for r in cases.values()), default=0.0)
+    min_step = min((r.get("min_step", np.inf) for r in cases.values()), default=np.inf)
+    lines = [
+        f"* {len(cases) - len(bad_status)}/{len(cases)} runs completed"
+        + (f"; failed: {', '.join(bad_status)}" if bad_status else ""),
+        f"* largest energy residual {worst:.1e} of the energy moved (tolerance {ENERGY_TOL:g})"
+        + (f"; above it: {', '.join(bad_energy)}" if bad_energy else ""),
+        "* outputs vs the run at a 10× tighter tolerance: "
+        + (
+            f"differ by more than {AGREE_TOL:g} in {', '.join(bad_ref)}"
+            if bad_ref
+            else f"all within {AGREE_TOL:g}"
+        ),  # fmt: skip
+        "* directional derivatives: "
+        + (f"NaN/inf in {', '.join(bad_grad)}" if bad_grad else "finite in every case run"),
+        f"* smallest accepted step {min_step:.1e} s",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def write_docs():
+    impact = _load("impact")
+    deploy = _load("deploy")
+    long = _load("long")
+    meta = (impact or deploy or long).get("_meta", {})
+    versions = meta.get("versions", {})
+    text = f"""# Robustness: extreme cases, bad input, nothing lost
+
+*Generated by `experiments/robustness.py`; do not edit by hand — rerun the script.*
+
+Machine: {meta.get("machine", "?")}, {os.cpu_count()} cores (shared; wall times are noisy),
+Python {versions.get("python", "?")}, JAX {versions.get("jax", "?")},
+diffrax {versions.get("diffrax", "?")}, float64. Solver: generalized-α (ρ∞ = 0.8), adaptive.
+
+## What is checked, and against what
+
+* **status / finite**: the solver's own result (a failure is reported with the time reached
+  and the reason, `Trajectory.status()`), and every saved state finite.
+* **energy balance**: `T + V + D = T(0) + V(0) + J` with T kinetic, V potential (contact
+  elastic energy, coil spring, latch, gravity), D the energy dissipated by each element's
+  non-conservative force, metered *inside* the run by `EnergyMeter` (trapezoid in q over each
+  accepted step), J the energy put in by memory updates (the latch engaging at an overshoot).
+  The residual is the integrator's energy error plus its numerical dissipation (ρ∞ = 0.8),
+  scaled by the energy that moved (max of T + D, plus |J|). Stated tolerance: {ENERGY_TOL:g}.
+* **Δ vs tighter tol**: max difference of the outputs (impact: final x and v_x of the journal;
+  deploy: the deployment angle at 201 saved times) to the same run with rtol and atol ÷ 10,
+  relative to the output's largest magnitude. Stated tolerance: {AGREE_TOL:g}.
+* **steps**: accepted (rejected) steps, and the smallest/largest accepted step from a clock
+  body (`add_clock`; it adds 3 coordinates with zero error to the RMS norm, ≈ sqrt(n/(n+3))).
+  The first step is the initial guess 1e-6 s, so a minimum of 1e-6 means "never below it".
+* **d/ds finite**: forward-mode derivative (`diffrax.ForwardMode`) of the outputs along
+  p_k → p_k(1 + s) for all nonzero parameters at once; a NaN or inf in any partial derivative
+  would show. The impact starts at zero eccentricity and crosses the contact onset; the
+  deploy runs cross the latch engagement and zero sliding speeds.
+* **diffrax path**: the same run with `solver="kvaerno5"` (issue 5) when this jaxdeploy has it.
+
+## Impact: journal in a fixed bearing, 2 ms
+
+Base: m = 1 kg, R_j = 5 mm, c = 10 µm, σ = 1 µm, steel E = 207 GPa (ν = 0.3), Flores damping
+c_e = 0.9, v0 = 1 m/s; K = (4/3) E* sqrt(R*) from the geometry. Step control
+{IMPACT_CONTROL}. When σ ≳ c/3 the rough law's onset ((s0 − 3)σ) lies inside the clearance:
+the centred journal is in (light) contact from t = 0.
+
+{_verdict(impact)}
+{_table(impact)}
+## deploy_array, 0.7 s (latch at ≈ 0.54 s), and 20 s
+
+Both clearance joints changed together; step control {dict(DeployArray.default_control)}.
+
+{_verdict(deploy)}
+{_table(deploy)}
+{_verdict(long) if long else ""}
+{_table(long) if long else "(20 s run: not run yet)"}
+
+## Bad input and nothing lost
+
+Refused before the output folder is created or the solver is compiled, each with the
+parameter, its value and the valid range (`tests/test_bad_input.py`): zero or negative
+clearance, negative Ra or σ, ν outside (−1, 0.5), c_e outside (0, 1], NaN or inf values, a
+journal larger than its bearing (`contact.radial_clearance`), a crank as long as its rod, an
+unassemblable pose (`AssemblyError` names the residual and the worst joint), unknown scene or
+parameter names, bad `--t-end`/`--n-save`, an output folder that already holds results.
+
+Every result file is written through `jaxdeploy.io` (temporary file in the same folder,
+fsync, atomic rename, folder fsync). `summary.json` is written last and marks a complete
+result; with `--overwrite` the old one is deleted before anything new is written, so a rerun
+that dies half-way cannot pass for a complete one. `tests/test_robustness.py` kills a writer
+with SIGKILL after half of its bytes: the previous file survives intact, only a hidden
+`.tmp-*` file remains.
+"""
+    atomic_write_bytes(DOC, text.encode())
+    print(f"wrote {DOC}")
+
+
+def main(argv):
+    what = argv[1] if len(argv) > 1 else "all"
+    for family in ("impact", "deploy", "long"):
+        if what in (family, "all"):
+            run_family(family)
+    write_docs()
+
+
+if __name__ == "__main__":
+    main(sys.argv)
