@@ -392,8 +392,12 @@ the centred journal is in (light) contact from t = 0.
 
 Both clearance joints changed together; step control {dict(DeployArray.default_control)}.
 
+**0.7 s runs:**
+
 {_verdict(deploy)}
 {_table(deploy, [n for n, _ in DEPLOY_CASES])}
+**Base case over 20 s** (unfolding, latch, 19.5 s of post-lock flutter; no derivative):
+
 {_verdict(long) if long else ""}
 {_table(long, ["base, 20 s"])}
 
