@@ -322,17 +322,17 @@ def _verdict(records):
     min_step = min((r.get("min_step", np.inf) for r in cases.values()), default=np.inf)
     lines = [
         f"* {len(cases) - len(bad_status)}/{len(cases)} runs completed"
-        + (f"; failed: {', '.join(bad_status)}" if bad_status else ""),
+        + (f"; failed: {'; '.join(bad_status)}" if bad_status else ""),
         f"* largest energy residual {worst:.1e} of the energy moved (tolerance {ENERGY_TOL:g})"
-        + (f"; above it: {', '.join(bad_energy)}" if bad_energy else ""),
+        + (f"; above it: {'; '.join(bad_energy)}" if bad_energy else ""),
         "* outputs vs the run at a 10× tighter tolerance: "
         + (
-            f"differ by more than {AGREE_TOL:g} in {', '.join(bad_ref)}"
+            f"differ by more than {AGREE_TOL:g} in {'; '.join(bad_ref)}"
             if bad_ref
             else f"all within {AGREE_TOL:g}"
         ),  # fmt: skip
         "* directional derivatives: "
-        + (f"NaN/inf in {', '.join(bad_grad)}" if bad_grad else "finite in every case run"),
+        + (f"NaN/inf in {'; '.join(bad_grad)}" if bad_grad else "finite in every case run"),
         f"* smallest accepted step {min_step:.1e} s",
     ]
     return "\n".join(lines) + "\n"
@@ -418,6 +418,11 @@ Both clearance joints changed together; step control {dict(DeployArray.default_c
   impacts, the smallest steps and the energy residual grow as c shrinks, and the final state
   depends on the tolerance (chaotic), while the dissipated energy does not much. Rows above
   the stated tolerances are listed in the verdicts, not hidden.
+* **Open: deploy_array with 1 µm clearances.** The run completes and agrees with the tighter
+  solve, but with many rejected steps, an energy residual above the tolerance, and a
+  forward-mode derivative that is NaN (see its row): a silent NaN in a derivative, not yet
+  traced to its source. The base case's derivative is finite but very large (see the JSON's
+  `gradient_max_abs`): impacting trajectories are sensitive over the horizon (DESIGN §5).
 * **Latch engagement** adds energy J = ½ k_L (α − α_L)² at the step after α crosses α_L (the
   overshoot is bounded by one step); it is booked as energy put in, not as an error.
 
