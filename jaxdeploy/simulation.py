@@ -1,8 +1,9 @@
 """`simulate`: integrate a mechanism from a consistent state and report what happened.
 
-A thin layer over `diffrax.diffeqsolve` with the generalized-α solver: fixed step (give `dt`)
-or adaptive (give `rtol`/`atol`), outputs at chosen times, solver statistics, and a status that
-says when and why a run failed (never silent NaN).
+A thin layer over `diffrax.diffeqsolve` with the generalized-α solver (default) or the index-1
+ODE path (`solver="kvaerno5"` etc., see `jaxdeploy.solvers.SOLVER_NAMES`): fixed step (give
+`dt`) or adaptive (give `rtol`/`atol`), outputs at chosen times, solver statistics, and a
+status that says when and why a run failed (never silent NaN).
 """
 
 from __future__ import annotations
@@ -14,10 +15,18 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 
 from ._validation import is_concrete
 from .mechanism import ConsistentState, Mechanism
-from .solvers import GeneralizedAlpha, MechanismState, MechanismTerm
+from .solvers import (
+    GeneralizedAlpha,
+    MechanismODESolver,
+    MechanismState,
+    MechanismTerm,
+    solver_by_name,
+    state_norm,
+)
 
 
 @dataclass(frozen=True)
@@ -33,23 +42,32 @@ class StepControl:
     dt_min: float | None = None
     dt_max: float | None = None
     max_steps: int = 2_000_000
+    # Error norm; the ODE path uses `state_norm` (positions and velocities only).
+    norm: object = None
 
     @property
     def adaptive(self) -> bool:
         return self.rtol is not None or self.atol is not None
 
     def controller(self):
+        """The diffrax step-size controller. Tolerances and step bounds are arrays, so they
+        are data of the compiled program: changing them does not recompile."""
         if not self.adaptive:
             return dfx.ConstantStepSize()
+
+        def data(x):
+            return None if x is None else jnp.asarray(x, dtype=float)
+
         # PI coefficients suited to stiff problems (diffrax docs; LITERATURE §3.4).
         return dfx.PIDController(
-            rtol=1e-6 if self.rtol is None else self.rtol,
-            atol=1e-9 if self.atol is None else self.atol,
+            rtol=data(1e-6 if self.rtol is None else self.rtol),
+            atol=data(1e-9 if self.atol is None else self.atol),
             pcoeff=0.3,
             icoeff=0.4,
-            dtmin=self.dt_min,
-            dtmax=self.dt_max,
+            dtmin=data(self.dt_min),
+            dtmax=data(self.dt_max),
             factormax=5.0,
+            norm=optx.rms_norm if self.norm is None else self.norm,
         )
 
 
@@ -106,9 +124,7 @@ def _save_times(t0, t_end, n_save, ts):
 
 
 @eqx.filter_jit
-def _solve(
-    mechanism, y0, t0, t_end, dt0, ts, solver, control: StepControl, progress: bool, adjoint
-):
+def _solve(mechanism, y0, t0, t_end, dt0, ts, solver, controller, max_steps, progress, adjoint):
     meter = dfx.TqdmProgressMeter() if progress else dfx.NoProgressMeter()
     sol = dfx.diffeqsolve(
         MechanismTerm(mechanism),
@@ -118,8 +134,8 @@ def _solve(
         dt0=dt0,
         y0=y0,
         saveat=dfx.SaveAt(ts=ts, solver_state=True),
-        stepsize_controller=control.controller(),
-        max_steps=control.max_steps,
+        stepsize_controller=controller,
+        max_steps=max_steps,
         throw=False,
         progress_meter=meter,
         adjoint=adjoint,
@@ -144,6 +160,7 @@ def simulate(
     solver=None,
     progress: bool = False,
     adjoint=None,
+    step_ts=None,
 ) -> Trajectory:
     """Integrate `mechanism` from `initial` (a `consistent_state`) to `t_end`.
 
@@ -151,15 +168,24 @@ def simulate(
     - `dt`: fixed step [s] (alone), or the first step of an adaptive run.
     - `rtol`, `atol`: adaptive step on the solver's error estimate (positions).
     - `n_save` / `ts`: output times (default: `n_save` equally spaced).
-    - `solver`: default `GeneralizedAlpha(rho_inf=0.8)`.
+    - `solver`: a solver object, or a name from `jaxdeploy.solvers.SOLVER_NAMES`:
+      `"generalized_alpha"` (the default, `GeneralizedAlpha(rho_inf=0.8)`), or a diffrax method
+      (`"kvaerno5"`, `"kvaerno3"`, `"tsit5"`, `"dopri8"`, …) on the index-1 ODE with coordinate
+      projection (`MechanismODESolver`); implicit ones take their Newton tolerances from
+      `rtol`/`atol`. With the ODE path the error norm covers positions and velocities.
     - `progress`: show a progress bar.
+    - `step_ts`: times every adaptive run must step to exactly (e.g. `ts`, so that saved
+      states are step end points rather than interpolated; used by the reference solutions).
     - `adjoint`: a diffrax adjoint (default `RecursiveCheckpointAdjoint`: reverse mode with
       checkpointing; use `diffrax.ForwardMode()` for forward-mode derivatives).
 
     **Returns:** a `Trajectory`; check `.ok` / `.status()`: a failed solve keeps the states it
     finished and says when and why it stopped.
     """
-    control = StepControl(rtol, atol, dt_min, dt_max, max_steps)
+    if isinstance(solver, str):
+        solver = solver_by_name(solver, rtol=rtol, atol=atol)
+    norm = state_norm if isinstance(solver, MechanismODESolver) else None
+    control = StepControl(rtol, atol, dt_min, dt_max, max_steps, norm)
     if dt is None and not control.adaptive:
         raise ValueError("give dt (fixed step) or rtol/atol (adaptive step)")
     if dt is None:
@@ -172,7 +198,26 @@ def simulate(
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
     y0 = MechanismState(initial.q, initial.v, initial.qdd, initial.lam, initial.memory)
     ts = _save_times(t0, t_end, n_save, ts)
-    sol = _solve(mechanism, y0, t0, t_end, dt0, ts, solver, control, progress, adjoint)
+    # Times are data too: a new t_end or t0 does not recompile.
+    t0, t_end = jnp.asarray(t0, dtype=float), jnp.asarray(t_end, dtype=float)
+    controller = control.controller()
+    if step_ts is not None:
+        if not control.adaptive:
+            raise ValueError("step_ts needs adaptive steps (give rtol/atol)")
+        controller = dfx.ClipStepSizeController(controller, step_ts=jnp.asarray(step_ts, float))
+    sol = _solve(
+        mechanism,
+        y0,
+        t0,
+        t_end,
+        dt0,
+        ts,
+        solver,
+        controller,
+        control.max_steps,
+        progress,
+        adjoint,
+    )
     ys = sol.ys
     stats = dict(sol.stats)
     if sol.solver_state is not None and hasattr(sol.solver_state, "newton_iterations"):

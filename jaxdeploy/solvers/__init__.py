@@ -6,13 +6,28 @@ from .generalized_alpha import (
     GeneralizedAlphaState,
     chung_hulbert,
 )
+from .index1 import (
+    Index1Field,
+    MechanismODESolver,
+    project_onto_constraints,
+    stabilised_accelerations,
+    state_norm,
+)
+from .registry import SOLVER_NAMES, solver_by_name
 from .term import MechanismState, MechanismTerm
 
 __all__ = [
+    "SOLVER_NAMES",
     "AlphaCoefficients",
     "GeneralizedAlpha",
     "GeneralizedAlphaState",
+    "Index1Field",
+    "MechanismODESolver",
     "MechanismState",
     "MechanismTerm",
     "chung_hulbert",
+    "project_onto_constraints",
+    "solver_by_name",
+    "stabilised_accelerations",
+    "state_norm",
 ]
