@@ -12,7 +12,7 @@ from jaxdeploy.benchmarks.peers import SliderCrankNumpy, solve_with_onset_events
 from jaxdeploy.benchmarks.reference import eccentricities
 from jaxdeploy.scenes import Impact, Pendulum, SliderCrank
 from jaxdeploy.simulation import simulate
-from jaxdeploy.solvers import SOLVER_NAMES, GeneralizedAlpha, solver_by_name
+from jaxdeploy.solvers import SOLVER_NAMES, solver_by_name
 
 # First contact of the Flores slider-crank starts at t ≈ 0.23 ms and ends before 0.33 ms.
 WINDOW = 0.35e-3
@@ -75,20 +75,23 @@ def test_kvaerno5_matches_independent_numpy_model_through_first_impact(slider_cr
     np.testing.assert_allclose(v_minus, exact, rtol=1e-6)
 
 
-def test_kvaerno5_agrees_with_switch_resolving_generalized_alpha(slider_crank):
-    """Two different discretisations (index-1 ESDIRK + projection; index-3 generalized-α)
-    of the same mechanism, both converged over the first impact."""
+def test_kvaerno5_and_generalized_alpha_converge_to_each_other(slider_crank):
+    """Two different discretisations (index-1 ESDIRK + projection; index-3 generalized-α) of
+    the same mechanism through the first impact. Generalized-α takes v⁻ at the start of the
+    step in which contact begins (an O(h) effect, docs/performance.md), so its difference
+    shrinks with h and is small at h = 1e-7 s."""
     params, mech, s0 = slider_crank
     ts = np.linspace(0.0, WINDOW, 36)
     k5 = simulate(mech, s0, WINDOW, ts=ts, solver="kvaerno5", rtol=1e-9, atol=1e-12)
-    alpha = GeneralizedAlpha(resolve_switches=True)
-    ga = simulate(mech, s0, WINDOW, ts=ts, solver=alpha, rtol=1e-9, atol=1e-12, dt_max=2e-6)
-    assert k5.ok and ga.ok
-    err = np.max(np.linalg.norm(eccentricities(mech, k5.q) - eccentricities(mech, ga.q), axis=-1))
-    assert err < GA_AGREEMENT, err
-
-
-GA_AGREEMENT = 1e-4
+    assert k5.ok
+    errors = []
+    for h in (2e-7, 1e-7):
+        ga = simulate(mech, s0, WINDOW, ts=ts, dt=h)
+        assert ga.ok
+        diff = eccentricities(mech, k5.q) - eccentricities(mech, ga.q)
+        errors.append(np.max(np.linalg.norm(diff, axis=-1)))
+    assert errors[1] < errors[0], errors
+    assert errors[1] < 3e-5, errors  # relative to c: 15 nm
 
 
 @pytest.mark.parametrize("name", ["kvaerno3", "tsit5"])

@@ -97,11 +97,6 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
     - `newton_max_iterations`: iterations before the step is declared failed (the step-size
       controller then rejects it; with constant steps the solve stops with
       `nonlinear_divergence` at that time).
-    - `resolve_switches`: with adaptive steps, a step in which a memory flag flips (contact
-      onset, latch engagement) reports its velocity change `|q̇₁ − q̇₀|` as error, so the
-      controller shrinks steps at switches. Memory is taken at the step's start (v⁻ is the
-      approach speed there), an O(h) model error that the O(h³) position estimate does not
-      see; without this option it limits accuracy after impacts (docs/performance.md).
 
     Works with `diffrax.ConstantStepSize` (fixed step) and `diffrax.PIDController` (adaptive,
     on the Zienkiewicz–Xie position error estimate).
@@ -111,7 +106,6 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
     newton_atol: float = eqx.field(static=True, default=1e-12)
     newton_rtol: float = eqx.field(static=True, default=1e-10)
     newton_max_iterations: int = eqx.field(static=True, default=12)
-    resolve_switches: bool = eqx.field(static=True, default=False)
 
     term_structure: ClassVar = MechanismTerm
     interpolation_cls: ClassVar = dfx.ThirdOrderHermitePolynomialInterpolation
@@ -194,22 +188,9 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
         # Error estimate under stop_gradient: step-size control must not be differentiated.
         err_q = jax.lax.stop_gradient(h**2 * (cf.beta - 1.0 / 6.0) * (qdd1 - qdd0))
         err_q = jnp.where(converged, err_q, jnp.inf)
-        err_v = jnp.zeros_like(v1)
-        if self.resolve_switches:
-            flips = [
-                jnp.any(a != b)
-                for a, b in zip(
-                    jax.tree_util.tree_leaves(memory),
-                    jax.tree_util.tree_leaves(memory1),
-                    strict=True,
-                )
-            ]
-            if flips:
-                switched = jnp.any(jnp.stack(flips))
-                err_v = jax.lax.stop_gradient(jnp.where(switched, jnp.abs(v1 - v0), err_v))
         y_error = MechanismState(
             q=err_q,
-            v=err_v,
+            v=jnp.zeros_like(v1),
             qdd=jnp.zeros_like(qdd1),
             lam=jnp.zeros_like(lam1),
             memory=jax.tree_util.tree_map(jnp.zeros_like, memory1),

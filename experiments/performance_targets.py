@@ -1,0 +1,220 @@
+"""Issue 5 targets, measured side by side in one run; writes docs/performance_targets.md.
+
+1. Per-step cost of generalized-α on the ideal slider-crank (Exudyn: ~14 µs/step) and on the
+   clearance slider-crank, with a profile of one Newton iteration's parts (each part run
+   10 000 times inside one compiled `lax.scan`, so dispatch overhead is excluded).
+2. Compile time of the default deploy_array simulation (first call − second call).
+3. A vmapped batch of 256 slider-crank runs (restitution varied): cost per simulation against
+   the best scipy peer's single run at equal or better accuracy (from a work-precision CSV).
+
+Usage: `python experiments/performance_targets.py [--bench-csv results/bench_slider_crank/
+work_precision.csv]`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxdeploy.benchmarks.reference import eccentricity_error, reference_solution
+from jaxdeploy.benchmarks.report import machine_description
+from jaxdeploy.io import atomic_write_bytes
+from jaxdeploy.scenes import DeployArray, SliderCrank
+from jaxdeploy.simulation import simulate
+
+OUT = os.path.join(os.path.dirname(__file__), "..", "docs", "performance_targets.md")
+
+
+def timed(fn, repeats=3):
+    start = time.perf_counter()
+    out = fn()
+    first = time.perf_counter() - start
+    walls = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        walls.append(time.perf_counter() - start)
+    return out, first, float(np.median(walls))
+
+
+def per_step(ideal: bool, dt: float):
+    scene = SliderCrank(ideal=ideal)
+    p = scene.resolve_params()
+    mech = scene.build(p)
+    s0 = scene.initial_state(p, mech)
+
+    def run():
+        tr = simulate(mech, s0, scene.default_t_end, dt=dt, n_save=2)
+        tr.q.block_until_ready()
+        return tr
+
+    tr, first, wall = timed(run)
+    steps = int(tr.stats["num_accepted_steps"])
+    iters = int(tr.stats["num_newton_iterations"])
+    return dict(steps=steps, newton=iters, wall=wall, compile=first - wall, us=wall / steps * 1e6)
+
+
+def profile_parts(n=10_000):
+    """µs per call of the parts of one clearance slider-crank Newton iteration."""
+    scene = SliderCrank()
+    p = scene.resolve_params()
+    mech = scene.build(p)
+    s0 = scene.initial_state(p, mech)
+    q, v, mem = s0.q, s0.v, s0.memory
+    lam = s0.lam
+    nq = q.shape[0]
+
+    def residual(z):
+        u, mu = z[:nq], z[nq:]
+        qq = q + u
+        dyn = mech.mass_diagonal() * u - mech.generalized_forces(qq, v + u, 0.0, mem) * 1e-12
+        dyn = dyn + mech.constraint_jacobian(qq, 0.0).T @ mu
+        return jnp.concatenate([dyn, mech.constraints(qq, 0.0)])
+
+    z0 = jnp.concatenate([jnp.zeros_like(q), lam])
+    parts = {
+        "contact + all forces Q(q, v)": lambda x: mech.generalized_forces(q + x[:nq], v, 0.0, mem),
+        "constraints Φ(q)": lambda x: mech.constraints(q + x[:nq], 0.0),
+        "constraint Jacobian Φ_q (jacfwd)": lambda x: mech.constraint_jacobian(q + x[:nq], 0.0),
+        "residual r(z)": residual,
+        "iteration matrix (jacfwd of r)": jax.jacfwd(residual),
+        "LU solve 16×16": lambda x: jnp.linalg.solve(jnp.eye(nq + lam.shape[0]) + x[0], x),
+    }
+    out = {}
+    for name, fn in parts.items():
+
+        @jax.jit
+        def loop(z, fn=fn):
+            def body(c, _):
+                r = fn(c)
+                return c + 1e-30 * jnp.sum(r), None
+
+            return jax.lax.scan(body, z, None, length=n)[0]
+
+        loop(z0).block_until_ready()
+        start = time.perf_counter()
+        loop(z0).block_until_ready()
+        out[name] = (time.perf_counter() - start) / n * 1e6
+    return out
+
+
+def deploy_compile():
+    scene = DeployArray()
+    p = scene.resolve_params()
+    mech = scene.build(p)
+    s0 = scene.initial_state(p, mech)
+
+    def run():
+        tr = simulate(mech, s0, 1e-3, n_save=3, **scene.default_control)
+        tr.q.block_until_ready()
+
+    _, first, wall = timed(run, repeats=1)
+    return dict(first=first, second=wall, compile=first - wall)
+
+
+def batch_vs_peer(bench_csv, dt=2.5e-7, size=256, t_end=None):
+    scene = SliderCrank()
+    p = scene.resolve_params()
+    t_end = scene.default_t_end if t_end is None else t_end
+    rows = list(csv.DictReader(open(bench_csv))) if bench_csv and os.path.exists(bench_csv) else []
+    ref = reference_solution("slider_crank", t_end=t_end, n_save=1201)
+    mech0 = scene.build(p)
+    s00 = scene.initial_state(p, mech0)
+    single = simulate(mech0, s00, t_end, ts=ref.ts, dt=dt)
+    err_window, err_full = eccentricity_error(mech0, single.q, ref.q, ref.ts, ref.window_end)
+
+    restitution = jnp.linspace(0.85, 0.95, size)
+
+    @jax.jit
+    def batch(e):
+        def one(ei):
+            params = dict(p, restitution=ei)
+            mech = scene.build(params)
+            s0 = scene.initial_state(params, mech)
+            return simulate(mech, s0, t_end, ts=ref.ts, dt=dt).q[-1]
+
+        return jax.vmap(one)(e)
+
+    _, first, wall = timed(lambda: batch(restitution).block_until_ready(), repeats=1)
+    peers = [
+        r
+        for r in rows
+        if r["kind"].startswith("scipy") and r["status"] == "ok"
+        and float(r["error_window"]) <= err_window
+    ]
+    best = min(peers, key=lambda r: float(r["wall_s"])) if peers else None
+    return dict(
+        dt=dt,
+        size=size,
+        error_window=err_window,
+        error_full=err_full,
+        batch_wall=wall,
+        batch_compile=first - wall,
+        per_sim=wall / size,
+        best_peer=None if best is None else f"{best['family']} {best['label']}",
+        best_peer_wall=None if best is None else float(best["wall_s"]),
+        best_peer_error=None if best is None else float(best["error_window"]),
+    )
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--bench-csv", default="results/bench_slider_crank/work_precision.csv")
+    parser.add_argument("--skip-batch", action="store_true")
+    args = parser.parse_args()
+    ideal = per_step(True, 1e-5)
+    print("ideal", ideal, flush=True)
+    clearance = per_step(False, 1e-6)
+    print("clearance", clearance, flush=True)
+    parts = profile_parts()
+    print(parts, flush=True)
+    dep = deploy_compile()
+    print("deploy", dep, flush=True)
+    batch = None if args.skip_batch else batch_vs_peer(args.bench_csv)
+    print("batch", batch, flush=True)
+    machine = machine_description()
+
+    lines = [
+        "<!-- generated by experiments/performance_targets.py; do not edit -->",
+        f"Machine: {machine.get('Model name', '?')}, {machine.get('CPU(s)', '?')} CPUs, "
+        f"load average {machine['load_average_1_5_15min'][0]:.1f} (other jobs share the CPUs: "
+        "absolute times are inflated by roughly that factor / CPUs; ratios within one run are "
+        "the meaningful numbers).",
+        "",
+        "| target | measured | goal |",
+        "|---|---|---|",
+        f"| gen-α step, ideal slider-crank (h = 1e-5, {ideal['steps']} steps, "
+        f"{ideal['newton'] / ideal['steps']:.2f} Newton it./step) | {ideal['us']:.1f} µs | "
+        "≤ ~14 µs (Exudyn) |",
+        f"| gen-α step, clearance slider-crank (h = 1e-6, {clearance['steps']} steps, "
+        f"{clearance['newton'] / clearance['steps']:.2f} Newton it./step) | "
+        f"{clearance['us']:.1f} µs | – |",
+        f"| compile, default deploy_array simulation | {dep['compile']:.1f} s | ≤ 30 s |",
+    ]
+    if batch is not None:
+        ratio = (
+            f"{batch['best_peer_wall'] / batch['per_sim']:.1f}× cheaper than {batch['best_peer']}"
+            f" ({batch['best_peer_wall']:.3g} s, error {batch['best_peer_error']:.1e})"
+            if batch["best_peer"]
+            else "no scipy peer reached this accuracy in the benchmark CSV"
+        )
+        lines.append(
+            f"| vmapped batch of {batch['size']} clearance slider-cranks (gen-α h = "
+            f"{batch['dt']:g}, window error {batch['error_window']:.1e}): per simulation | "
+            f"{batch['per_sim'] * 1e3:.1f} ms, {ratio} | ≥ 20× |"
+        )
+    lines += ["", "Where one Newton iteration's time goes (clearance slider-crank, µs per call "
+              "inside one compiled loop):", "", "| part | µs |", "|---|---|"]
+    lines += [f"| {k} | {v:.2f} |" for k, v in parts.items()]
+    atomic_write_bytes(OUT, ("\n".join(lines) + "\n").encode())
+    print("wrote", OUT)
+
+
+if __name__ == "__main__":
+    main()

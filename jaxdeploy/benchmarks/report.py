@@ -1,0 +1,132 @@
+"""Writing a work–precision run: CSV, markdown table, PNG plot, JSON metadata (atomically)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import platform
+import subprocess
+
+from ..io import atomic_write_bytes, atomic_write_json, run_metadata
+from .work_precision import Row, rows_as_dicts
+
+
+def machine_description() -> dict:
+    """CPU model, core count and load at the time of the run (lscpu when available)."""
+    info = {"platform": platform.platform(), "python": platform.python_version()}
+    try:
+        lscpu = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
+        for line in lscpu.splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() in (
+                "Model name",
+                "CPU(s)",
+                "Thread(s) per core",
+                "L2 cache",
+                "L3 cache",
+            ):
+                info[key.strip()] = value.strip()
+    except (OSError, subprocess.SubprocessError):
+        pass
+    info["load_average_1_5_15min"] = os.getloadavg()
+    return info
+
+
+def markdown_table(rows: list[Row]) -> str:
+    header = (
+        "| configuration | setting | error (window) | error (full) | wall [s] | compile [s] "
+        "| steps | rejected | Newton it. | peak RSS [MB] | status |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|\n"
+    )
+    lines = []
+    for r in rows:
+        lines.append(
+            f"| {r.family} | {r.label} | {r.error_window:.2e} | {r.error_full:.2e} "
+            f"| {r.wall_s:.3g} | {r.compile_s:.3g} | {r.steps} "
+            f"| {r.rejected if r.rejected >= 0 else '–'} "
+            f"| {r.newton_iterations if r.newton_iterations >= 0 else '–'} "
+            f"| {r.peak_rss_mb:.0f} | {r.status} |"
+        )
+    return header + "\n".join(lines) + "\n"
+
+
+def plot(rows: list[Row], path: str, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), sharey=True)
+    families = list(dict.fromkeys(r.family for r in rows))
+    markers = "os^vD<>ph*xP"
+    for i, family in enumerate(families):
+        sel = [r for r in rows if r.family == family and r.status == "ok"]
+        if not sel:
+            continue
+        style = "-" if "scipy" not in family else "--"
+        for ax, attr in zip(axes, ("error_window", "error_full"), strict=True):
+            ax.loglog(
+                [getattr(r, attr) for r in sel],
+                [r.wall_s for r in sel],
+                style,
+                marker=markers[i % len(markers)],
+                label=family,
+                ms=5,
+            )
+    axes[0].set_xlabel("error over the reference window (max |e − e_ref| / c)")
+    axes[1].set_xlabel("error over the full horizon")
+    axes[0].set_ylabel("wall time per run [s] (median, compilation excluded)")
+    for ax in axes:
+        ax.grid(alpha=0.3, which="both")
+        ax.invert_xaxis()
+    axes[1].legend(fontsize=7, loc="best")
+    fig.suptitle(title)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=120)
+    plt.close(fig)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def write_report(out_dir: str, scene: str, reference, rows: list[Row], options: dict) -> list[str]:
+    """Write `work_precision.csv`, `.md`, `.png` and `.json` into `out_dir`."""
+    dicts = rows_as_dicts(rows)
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=list(dicts[0]))
+    writer.writeheader()
+    writer.writerows(dicts)
+    paths = {k: os.path.join(out_dir, f"work_precision.{k}") for k in ("csv", "md", "png", "json")}
+    atomic_write_bytes(paths["csv"], buf.getvalue().encode())
+    bound = reference.error_bound
+    machine = machine_description()
+    md = (
+        f"Scene `{scene}`, horizon {reference.ts[-1]:.4g} s, {reference.ts.size} output times, "
+        f"reference window t ≤ {reference.window_end:.4g} s. Reference: Dopri8 at rtol "
+        f"{reference.rtol:g}; its estimated error (largest difference to the check runs) is "
+        f"{bound[0]:.1e} over the window and {bound[1]:.1e} over the full horizon. "
+        f"Machine: {machine.get('Model name', '?')}, {machine.get('CPU(s)', '?')} CPUs, "
+        f"load average {machine['load_average_1_5_15min'][0]:.1f} at the end of the run.\n\n"
+        + markdown_table(rows)
+    )
+    atomic_write_bytes(paths["md"], md.encode())
+    plot(rows, paths["png"], f"work–precision, {scene}")
+    atomic_write_json(
+        paths["json"],
+        dict(
+            scene=scene,
+            options=options,
+            reference=dict(
+                rtol=reference.rtol,
+                window_end=reference.window_end,
+                t_end=float(reference.ts[-1]),
+                n_save=int(reference.ts.size),
+                evidence=reference.evidence,
+                params=reference.params,
+            ),
+            machine=machine,
+            rows=dicts,
+            versions=run_metadata(),
+        ),
+    )
+    return list(paths.values())

@@ -1,0 +1,275 @@
+"""Work–precision benchmark: every solver configuration against a reference, in one run.
+
+For each configuration: the error against the reference (relative clearance-joint
+eccentricity, over the reference window and over the full horizon; `reference.py`), wall time
+(median of `repeats` runs after a first, compiling run; compile time = first run − median),
+steps, rejected steps, Newton iterations (generalized-α), and the process's peak resident
+memory after the configuration (a monotone, process-wide figure: it shows which configuration
+first needed more memory, not each one's own footprint).
+"""
+
+from __future__ import annotations
+
+import resource
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..scenes import get_scene
+from ..simulation import simulate
+from ..solvers import GeneralizedAlpha, solver_by_name
+from .reference import Reference, eccentricity_error, reference_solution
+
+
+@dataclass
+class Config:
+    """One benchmarked configuration."""
+
+    family: str  # plot series, e.g. "gen-α fixed ρ∞=0.8"
+    label: str  # e.g. "h=1e-06"
+    kind: str  # "jaxdeploy", "scipy-numpy", "scipy-jitted"
+    solver: str
+    rtol: float | None = None
+    atol: float | None = None
+    dt: float | None = None
+    rho_inf: float = 0.8
+    dt_max: float | None = None
+
+
+@dataclass
+class Row:
+    family: str
+    label: str
+    kind: str
+    error_window: float
+    error_full: float
+    wall_s: float
+    compile_s: float
+    steps: int
+    rejected: int
+    newton_iterations: int
+    peak_rss_mb: float
+    status: str
+
+
+def configurations(scene_name: str, quick: bool) -> list[Config]:
+    """The configurations benchmarked on a scene (`quick`: a handful, for tests)."""
+    out = []
+    if quick:
+        out += [
+            Config("gen-α fixed ρ∞=0.8", "h=1e-06", "jaxdeploy", "generalized_alpha", dt=1e-6),
+            Config(
+                "gen-α adaptive ρ∞=0.8",
+                "rtol=1e-06",
+                "jaxdeploy",
+                "generalized_alpha",
+                rtol=1e-6,
+                atol=1e-9,
+            ),
+            Config("diffrax Kvaerno5", "rtol=1e-06", "jaxdeploy", "kvaerno5", 1e-6, 1e-9),
+        ]
+        if scene_name == "slider_crank":
+            out += [
+                Config("scipy DOP853 (numpy)", "rtol=1e-06", "scipy-numpy", "DOP853", 1e-6, 1e-9),
+                Config("scipy LSODA (jitted)", "rtol=1e-06", "scipy-jitted", "LSODA", 1e-6, 1e-9),
+            ]
+        return out
+    # A sweep sized for a shared 2-core machine (each configuration compiles once).
+    if scene_name == "slider_crank":
+        steps, sub = [4e-6, 1e-6, 2.5e-7], [1e-6]
+    else:
+        steps, sub = [4e-5, 1e-5], [1e-5]
+    for rho in (0.8, 0.5, 0.9):
+        for h in steps if rho == 0.8 else sub:
+            out.append(
+                Config(
+                    f"gen-α fixed ρ∞={rho}",
+                    f"h={h:.0e}",
+                    "jaxdeploy",
+                    "generalized_alpha",
+                    dt=h,
+                    rho_inf=rho,
+                )
+            )
+    tols = [1e-5, 1e-7]
+    for tol in [1e-5, 1e-6, 1e-7]:
+        out.append(
+            Config(
+                "gen-α adaptive ρ∞=0.8",
+                f"rtol={tol:.0e}",
+                "jaxdeploy",
+                "generalized_alpha",
+                tol,
+                tol * 1e-3,
+            )
+        )
+    for solver, solver_tols in (
+        ("kvaerno5", tols),
+        ("kvaerno3", [1e-6]),
+        ("tsit5", [1e-6, 1e-8]),
+        ("dopri8", [1e-8]),
+    ):
+        for tol in solver_tols:
+            out.append(
+                Config(
+                    f"diffrax {solver.capitalize()}",
+                    f"rtol={tol:.0e}",
+                    "jaxdeploy",
+                    solver,
+                    tol,
+                    tol * 1e-3,
+                )
+            )
+    if scene_name == "slider_crank":
+        for method in ("Radau", "BDF", "LSODA", "DOP853"):
+            for tol in (1e-6, 1e-9):
+                out.append(
+                    Config(
+                        f"scipy {method} (numpy)",
+                        f"rtol={tol:.0e}",
+                        "scipy-numpy",
+                        method,
+                        tol,
+                        tol * 1e-3,
+                    )
+                )
+            out.append(
+                Config(f"scipy {method} (jitted)", "rtol=1e-06", "scipy-jitted", method, 1e-6, 1e-9)
+            )
+    return out
+
+
+def _peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _run_jaxdeploy(cfg: Config, mech, s0, ts, t_end):
+    if cfg.solver == "generalized_alpha":
+        solver = GeneralizedAlpha(rho_inf=cfg.rho_inf)
+    else:
+        solver = solver_by_name(cfg.solver, rtol=cfg.rtol, atol=cfg.atol)
+    tr = simulate(
+        mech,
+        s0,
+        t_end,
+        ts=ts,
+        dt=cfg.dt,
+        rtol=cfg.rtol,
+        atol=cfg.atol,
+        dt_max=cfg.dt_max,
+        solver=solver,
+        max_steps=5_000_000,
+    )
+    tr.q.block_until_ready()
+    stats = tr.stats
+    return (
+        np.asarray(tr.q),
+        int(stats["num_accepted_steps"]),
+        int(stats["num_rejected_steps"]),
+        int(stats.get("num_newton_iterations", -1)),
+        tr.status(),
+    )
+
+
+def _run_scipy(cfg: Config, model, y0, ts, t_end):
+    from .peers import solve_with_onset_events
+
+    rhs, penetration, rate = model
+    run = solve_with_onset_events(
+        rhs, penetration, rate, y0, (0.0, t_end), ts, cfg.solver, cfg.rtol, cfg.atol
+    )
+    n = y0.size // 2
+    # solve_ivp does not report rejected steps or Newton iterations.
+    return run.ys[:, :n], run.n_steps, -1, -1, "ok" if run.ok else run.message
+
+
+def run_benchmark(
+    scene_name: str = "slider_crank",
+    *,
+    quick: bool = False,
+    repeats: int = 3,
+    t_end: float | None = None,
+    n_save: int | None = None,
+    reference: Reference | None = None,
+    log=print,
+) -> tuple[Reference, list[Row]]:
+    """Run every configuration of `configurations(scene_name, quick)`.
+
+    **Returns:** `(reference, rows)`.
+    """
+    scene = get_scene(scene_name)
+    if t_end is None:
+        t_end = (0.6e-3 if scene_name == "slider_crank" else 0.1) if quick else None
+    if reference is None:
+        log(f"reference for {scene_name} ...")
+        reference = reference_solution(
+            scene_name,
+            t_end=t_end,
+            n_save=n_save or (61 if quick else 1201),
+            rtol=1e-10 if quick else 1e-12,
+        )
+        log(f"  evidence: {reference.evidence}")
+    params = reference.params
+    mech = scene.build(params)
+    s0 = scene.initial_state(params, mech)
+    ts = reference.ts
+    t_end = float(ts[-1])
+    models = {}
+    rows = []
+    for cfg in configurations(scene_name, quick):
+        if cfg.kind == "jaxdeploy":
+
+            def call(cfg=cfg):
+                return _run_jaxdeploy(cfg, mech, s0, ts, t_end)
+
+        else:
+            if cfg.kind not in models:
+                from .peers import SliderCrankNumpy, jitted_rhs
+
+                if cfg.kind == "scipy-numpy":
+                    m = SliderCrankNumpy(params)
+                    models[cfg.kind] = (m.rhs, m.penetration, m.penetration_rate)
+                else:
+                    models[cfg.kind] = jitted_rhs(mech)
+            y0 = np.concatenate([np.asarray(s0.q), np.asarray(s0.v)])
+
+            def call(cfg=cfg, model=models[cfg.kind], y0=y0):
+                return _run_scipy(cfg, model, y0, ts, t_end)
+
+        start = time.perf_counter()
+        q, steps, rejected, newton, status = call()
+        first = time.perf_counter() - start
+        walls = []
+        for _ in range(repeats):
+            start = time.perf_counter()
+            call()
+            walls.append(time.perf_counter() - start)
+        wall = float(np.median(walls)) if walls else first
+        # Compile time is meaningful for the jitted paths only (scipy-jitted: the RHS).
+        compile_s = max(first - wall, 0.0) if cfg.kind != "scipy-numpy" else 0.0
+        window, full = eccentricity_error(mech, q, reference.q, ts, reference.window_end)
+        row = Row(
+            cfg.family,
+            cfg.label,
+            cfg.kind,
+            window,
+            full,
+            wall,
+            compile_s,
+            steps,
+            rejected,
+            newton,
+            _peak_rss_mb(),
+            status,
+        )
+        log(
+            f"  {cfg.family:34s} {cfg.label:11s} err {window:9.2e} / {full:9.2e}  "
+            f"wall {wall:8.3f}s compile {compile_s:6.1f}s steps {steps} rej {rejected} {status}"
+        )
+        rows.append(row)
+    return reference, rows
+
+
+def rows_as_dicts(rows: list[Row]) -> list[dict]:
+    return [asdict(r) for r in rows]
