@@ -145,7 +145,8 @@ def batch_vs_peer(bench_csv, dt=2.5e-7, size=256, t_end=None):
     peers = [
         r
         for r in rows
-        if r["kind"].startswith("scipy") and r["status"] == "ok"
+        if r["kind"].startswith("scipy")
+        and r["status"] == "ok"
         and float(r["error_window"]) <= err_window
     ]
     best = min(peers, key=lambda r: float(r["wall_s"])) if peers else None
@@ -209,8 +210,14 @@ def main():
             f"{batch['dt']:g}, window error {batch['error_window']:.1e}): per simulation | "
             f"{batch['per_sim'] * 1e3:.1f} ms, {ratio} | ≥ 20× |"
         )
-    lines += ["", "Where one Newton iteration's time goes (clearance slider-crank, µs per call "
-              "inside one compiled loop):", "", "| part | µs |", "|---|---|"]
+    lines += [
+        "",
+        "Where one Newton iteration's time goes (clearance slider-crank, µs per call "
+        "inside one compiled loop):",
+        "",
+        "| part | µs |",
+        "|---|---|",
+    ]
     lines += [f"| {k} | {v:.2f} |" for k, v in parts.items()]
     atomic_write_bytes(OUT, ("\n".join(lines) + "\n").encode())
     print("wrote", OUT)
