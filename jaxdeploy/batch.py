@@ -118,6 +118,34 @@ def _stack_cases(scene: Scene, cases, fixed: Mapping | None):
     return table, varied, shared
 
 
+def batch_function(
+    scene: Scene,
+    varied: tuple[str, ...],
+    shared: Mapping,
+    t_end: float,
+    ts,
+    *,
+    control: Mapping | None = None,
+    evaluate=None,
+    **simulate_options,
+):
+    """The jitted, vmapped run of `scene` over the `varied` parameters (the rest `shared`).
+
+    Call it with a tuple of `(B,)` arrays, one per varied name; it returns the batch's
+    `Trajectory` (leading axis B), or `(trajectory, evaluate(params, trajectory))` when
+    `evaluate` is given (per case, inside the same compiled program). Build it once and call it
+    on many chunks: it compiles once per chunk shape and input sharding (inputs placed with a
+    `jax.sharding.NamedSharding` run sharded across devices).
+    """
+
+    def one(varied_values):
+        params = {**shared, **dict(zip(varied, varied_values, strict=True))}
+        trajectory = run_scene(scene, params, t_end, ts=ts, control=control, **simulate_options)
+        return trajectory if evaluate is None else (trajectory, evaluate(params, trajectory))
+
+    return jax.jit(jax.vmap(one))
+
+
 def simulate_batch(
     scene: Scene,
     cases,
@@ -145,16 +173,13 @@ def simulate_batch(
     table, varied, shared = _stack_cases(scene, cases, fixed)
     t_end = scene.default_t_end if t_end is None else t_end
     ts = jnp.linspace(0.0, t_end, n_save) if ts is None else jnp.asarray(ts, dtype=float)
-
-    def one(varied_values):
-        params = {**shared, **dict(zip(varied, varied_values, strict=True))}
-        return run_scene(scene, params, t_end, ts=ts, control=control, **simulate_options)
-
-    stacked = tuple(jnp.asarray(table[k]) for k in varied)
     if varied:
-        trajectory = jax.jit(jax.vmap(one))(stacked)
+        run = batch_function(scene, varied, shared, t_end, ts, control=control, **simulate_options)
+        trajectory = run(tuple(jnp.asarray(table[k]) for k in varied))
     else:  # identical cases: run once, broadcast
-        single = jax.jit(one)(())
+        single = jax.jit(
+            lambda: run_scene(scene, shared, t_end, ts=ts, control=control, **simulate_options)
+        )()
         n = len(table[next(iter(table))])
         trajectory = jax.tree.map(
             lambda leaf: jnp.broadcast_to(leaf, (n, *jnp.shape(leaf))), single

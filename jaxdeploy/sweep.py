@@ -1,0 +1,272 @@
+"""Parameter sweeps at scale: vmapped chunks, sharded across devices, written as they finish,
+resumable after a crash.
+
+The cases are the Cartesian product of the grid, in a fixed order (the last name varies
+fastest); case `i` is always the same parameter set. They run in chunks of `chunk_size` cases:
+each chunk is one vmapped simulation (`batch.batch_function`, compiled once for the sweep)
+whose batch axis is sharded over all local devices (a `NamedSharding` over a 1-D mesh of
+`jax.devices()`; the chunk is padded to a multiple of the device count with copies of its last
+case, dropped on output), so memory is bounded by one chunk, whatever the number of cases.
+
+Each finished chunk is written atomically as `chunk_NNNNN.npz` (case indices, parameters,
+status, step counts, optional per-case features and trajectories), then recorded in
+`manifest.json` (also written atomically). A chunk counts as done only once it is in the
+manifest and its file exists, so a kill at any moment loses at most the running chunk; `resume`
+re-runs exactly the chunks not yet recorded: no case is lost or duplicated. The manifest stores
+the sweep's definition (scene, grid, fixed parameters, times, step control, chunk size,
+versions); resuming with a different definition is refused.
+
+Multi-host (`jax.distributed`): start the same command on every host after
+`jax.distributed.initialize()` (the `--distributed` flag calls it, reading the coordinator
+address, process count and id from the usual `JAX_COORDINATOR_ADDRESS`, `JAX_NUM_PROCESSES`,
+`JAX_PROCESS_ID` environment variables or the cluster's auto-detection). `jax.devices()` is then
+the global device list, each chunk is one program over all hosts' devices (inputs built with
+`jax.make_array_from_callback`, so each host supplies only its shards), results are gathered
+with `multihost_utils.process_allgather`, and only process 0 writes files.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import os
+import sys
+import time
+from collections.abc import Callable, Mapping
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .batch import _stack_cases, batch_function, step_control
+from .io import atomic_write_json, atomic_write_npz, run_metadata
+from .scenes.base import Scene
+
+MANIFEST = "manifest.json"
+
+
+def grid_cases(grid: Mapping[str, list]) -> dict[str, np.ndarray]:
+    """The Cartesian product of `grid` `{name: values}` as `{name: (B,) array}`, the last name
+    varying fastest."""
+    if not grid:
+        raise ValueError("grid: give at least one NAME=v1,v2,...")
+    for name, values in grid.items():
+        if len(values) == 0:
+            raise ValueError(f"grid: {name!r} has no values")
+    rows = list(itertools.product(*grid.values()))
+    return {name: np.array([float(r[i]) for r in rows]) for i, name in enumerate(grid)}
+
+
+def _definition(scene, grid, fixed, t_end, n_save, control, chunk_size, features) -> dict:
+    return {
+        "scene": scene.name,
+        "grid": {k: [float(v) for v in vs] for k, vs in grid.items()},
+        "fixed": {k: float(v) for k, v in (fixed or {}).items()},
+        "t_end": float(t_end),
+        "n_save": int(n_save),
+        "control": {k: (None if v is None else float(v)) for k, v in control.items()},
+        "chunk_size": int(chunk_size),
+        "features": features,
+    }
+
+
+def _read_manifest(path):
+    import json
+
+    with open(path) as fh:
+        return json.load(fh)
+
+
+def _device_mesh():
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    devices = np.array(jax.devices())
+    mesh = Mesh(devices, ("cases",))
+    return NamedSharding(mesh, PartitionSpec("cases")), len(devices)
+
+
+def _place(values: np.ndarray, sharding):
+    """A global array sharded over the mesh, each process supplying its own shards."""
+    return jax.make_array_from_callback(values.shape, sharding, lambda index: values[index])
+
+
+def _gather(tree):
+    if jax.process_count() > 1:
+        from jax.experimental import multihost_utils
+
+        return multihost_utils.process_allgather(tree, tiled=True)
+    return jax.tree.map(np.asarray, tree)
+
+
+def sweep(
+    scene: Scene,
+    grid: Mapping[str, list],
+    out_dir: str,
+    *,
+    t_end: float | None = None,
+    n_save: int = 201,
+    fixed: Mapping | None = None,
+    control: Mapping | None = None,
+    chunk_size: int = 16,
+    resume: bool = False,
+    evaluate: Callable | None = None,
+    features: str | None = None,
+    save_trajectories: bool = True,
+    progress: bool = False,
+    stop_after_chunks: int | None = None,
+    seed: int | None = None,
+) -> dict:
+    """Run every case of `grid` (Cartesian product; see module docstring) into `out_dir`.
+
+    **Arguments:**
+    - `grid`: `{name: [values]}`; `fixed`: other parameters (defaults otherwise).
+    - `chunk_size`: cases per vmapped run (bounds memory; rounded up to a multiple of the
+      device count).
+    - `resume`: continue a sweep in `out_dir` (its definition must match); without it a
+      non-empty `out_dir` is refused.
+    - `evaluate(params, trajectory) -> {name: scalar}`: per-case features computed inside the
+      compiled run (e.g. design objectives); `features` names it in the manifest.
+    - `save_trajectories`: store `q`, `v` at the saved times per case.
+    - `stop_after_chunks`: stop (raise `KeyboardInterrupt`) after that many chunks of this call
+      (tests of resume).
+
+    **Returns:** the manifest (a dict).
+    """
+    t_end = scene.default_t_end if t_end is None else float(t_end)
+    control = step_control(scene, control)
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size = {chunk_size!r} is invalid: it must be ≥ 1")
+    cases = grid_cases(grid)
+    n_cases = len(next(iter(cases.values())))
+    # Validate every case before anything runs (names, ranges), and split varied names.
+    table, varied, shared = _stack_cases(scene, cases, fixed)
+    if not varied:  # one case (or copies): still trace the first grid name
+        first = next(iter(grid))
+        varied, shared = (first,), {k: v for k, v in shared.items() if k != first}
+    sharding, n_devices = _device_mesh()
+    chunk_size = n_devices * math.ceil(chunk_size / n_devices)
+    definition = _definition(scene, grid, fixed, t_end, n_save, control, chunk_size, features)
+    manifest_path = os.path.join(out_dir, MANIFEST)
+    writer = jax.process_index() == 0
+
+    if os.path.exists(manifest_path):
+        if not resume:
+            raise FileExistsError(
+                f"{out_dir!r} already holds a sweep; pass --resume to continue it or choose "
+                "another --out"
+            )
+        manifest = _read_manifest(manifest_path)
+        if manifest["definition"] != definition:
+            raise ValueError(
+                f"--resume: the sweep in {out_dir!r} was defined differently "
+                f"({manifest['definition']}); it cannot continue as {definition}"
+            )
+    else:
+        if os.path.isdir(out_dir) and os.listdir(out_dir):
+            raise FileExistsError(
+                f"output folder {out_dir!r} is not empty and holds no sweep manifest; choose "
+                "another --out"
+            )
+        manifest = {
+            "definition": definition,
+            "n_cases": n_cases,
+            "varied": list(varied),
+            "params": {k: float(v) for k, v in shared.items()},
+            "seed": seed,
+            "devices": [str(d) for d in jax.devices()],
+            "process_count": jax.process_count(),
+            "versions": run_metadata(),
+            "chunks": [],
+        }
+        if writer:
+            atomic_write_json(manifest_path, manifest)
+
+    done = {c["index"] for c in manifest["chunks"] if _chunk_done(out_dir, c)}
+    manifest["chunks"] = [c for c in manifest["chunks"] if c["index"] in done]
+    n_chunks = math.ceil(n_cases / chunk_size)
+    todo = [k for k in range(n_chunks) if k not in done]
+    ts = jnp.linspace(0.0, t_end, n_save)
+    run = batch_function(
+        scene, varied, shared, t_end, ts, control=control, evaluate=_wrap(evaluate)
+    )
+    bar = _progress(progress, n_cases, sum(c["stop"] - c["start"] for c in manifest["chunks"]))
+    for count, k in enumerate(todo):
+        if stop_after_chunks is not None and count >= stop_after_chunks:
+            raise KeyboardInterrupt(f"sweep stopped after {count} chunks (stop_after_chunks)")
+        start, stop = k * chunk_size, min((k + 1) * chunk_size, n_cases)
+        index = np.arange(start, stop)
+        padded = np.concatenate([index, np.full(chunk_size - len(index), stop - 1)])
+        began = time.perf_counter()
+        inputs = tuple(_place(table[name][padded], sharding) for name in varied)
+        trajectory, feats = run(inputs)
+        trajectory, feats = _gather((trajectory, feats))
+        n = len(index)
+        arrays = {
+            "case": index,
+            "result": np.asarray(trajectory.result._value)[:n],
+            "num_steps": np.asarray(trajectory.stats["num_accepted_steps"])[:n],
+            "num_rejected": np.asarray(trajectory.stats["num_rejected_steps"])[:n],
+            **{f"param_{name}": table[name][index] for name in table},
+            **{f"feature_{name}": np.asarray(v)[:n] for name, v in feats.items()},
+        }
+        if save_trajectories:
+            arrays.update(t=np.asarray(ts), q=trajectory.q[:n], v=trajectory.v[:n])
+        record = {
+            "index": k,
+            "file": f"chunk_{k:05d}.npz",
+            "start": int(start),
+            "stop": int(stop),
+            "failed": int(np.sum(arrays["result"] != 0)),
+            "wall_time_s": time.perf_counter() - began,
+        }
+        if writer:
+            atomic_write_npz(os.path.join(out_dir, record["file"]), **arrays)
+            manifest["chunks"].append(record)
+            manifest["chunks"].sort(key=lambda c: c["index"])
+            atomic_write_json(manifest_path, manifest)
+        if bar is not None:
+            bar.update(n)
+    if bar is not None:
+        bar.close()
+    return manifest
+
+
+def _wrap(evaluate):
+    def features(params, trajectory):
+        return {} if evaluate is None else dict(evaluate(params, trajectory))
+
+    return features
+
+
+def _chunk_done(out_dir, record) -> bool:
+    return os.path.exists(os.path.join(out_dir, record["file"]))
+
+
+def _progress(enabled, total, initial):
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=initial, unit="case", file=sys.stderr, desc="sweep")
+
+
+def load_sweep(out_dir: str) -> dict:
+    """Every finished case of the sweep in `out_dir`, in case order: `{"case": (B,),
+    "param_*": (B,), "feature_*": (B,), "result": (B,), ... , "q": (B, N, n) if saved}`, and
+    the manifest under `"manifest"`. Raises if a case appears twice."""
+    manifest = _read_manifest(os.path.join(out_dir, MANIFEST))
+    parts = []
+    for record in manifest["chunks"]:
+        with np.load(os.path.join(out_dir, record["file"])) as data:
+            parts.append({k: data[k] for k in data.files})
+    if not parts:
+        return {"manifest": manifest, "case": np.zeros(0, dtype=int)}
+    out = {k: np.concatenate([p[k] for p in parts]) for k in parts[0] if k != "t"}
+    if "t" in parts[0]:
+        out["t"] = parts[0]["t"]
+    order = np.argsort(out["case"], kind="stable")
+    out = {k: (v[order] if k != "t" else v) for k, v in out.items()}
+    if len(np.unique(out["case"])) != len(out["case"]):
+        raise RuntimeError(f"sweep in {out_dir!r}: a case is recorded twice")
+    out["manifest"] = manifest
+    return out
