@@ -1,0 +1,485 @@
+"""Choosing parameters by gradients: a scene, an objective on its deployment, bounds, optax.
+
+`DesignProblem` turns a scene and an `objectives.Objective` into a pure function of the design
+parameters, J(x) (one simulation; the ideal-joint reference is computed once, at construction,
+since it does not depend on the joint parameters). `optimize` minimises J over a box by a
+bounded reparametrisation and optax; `evaluate_batch` evaluates J for many designs as one
+vmapped run (`batch.simulate_batch`); `expected_objective` is J's expectation under a
+`Scatter` (manufacturing tolerances) with its gradient, estimated from antithetic samples run
+as one batch (`BatchObjective`).
+
+Why sampled gradients for deploy_array: pathwise derivatives through the solver are exact for
+the discrete map (fixed steps: AD equals central differences with h = 1e-4 in ln c), but after
+contact chatter the objective is rough at small scales (its central differences at h = 1e-3
+and 1e-2 differ from the local derivative by 30×, with other signs), and with adaptive steps the
+pathwise derivative of post-lock features reaches 1e15 where differences over h = 0.1 give
+O(1). The design question is about the trend over tens of percent of Ra and c, so the
+objective optimised is the Gaussian-smoothed (or tolerance-averaged) J, whose gradient is
+estimated by Stein's identity (`Scatter.estimate`); `optimize` also takes pathwise gradients
+for smooth problems.
+
+Bounds by reparametrisation (DESIGN.md §5): every parameter x_i ∈ [l_i, u_i] is a smooth
+function of an unconstrained u_i,
+
+    x_i = exp(ln l_i + (ln u_i − ln l_i) σ(u_i))   (l_i > 0: uniform in ln x, for Ra and c)
+    x_i = l_i + (u_i − l_i) σ(u_i)                  (otherwise),
+
+σ the logistic function; the optimiser sees only u, so every iterate is machinable.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import diffrax as dfx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .batch import run_scene, simulate_batch
+from .objectives import Deployment, Objective, ideal_lock_time
+from .scenes.base import Scene
+
+# Machinable ranges (SI): turned and reamed/ground hinge surfaces span Ra 0.2–6.3 µm (the
+# ISO 1302 preferred series from 0.2 to 6.3), radial clearances of fitted pins 5–150 µm.
+MACHINABLE = {"ra": (0.2e-6, 6.3e-6), "clearance": (5e-6, 150e-6)}
+
+
+def machinable_bounds(scene: Scene, names) -> dict[str, tuple[float, float]]:
+    """Default bounds of `names`: `*_ra` and `*_clearance` from `MACHINABLE`; others must be
+    given explicitly."""
+    out = {}
+    for name in names:
+        kind = name.rsplit("_", 1)[-1]
+        if kind not in MACHINABLE:
+            raise ValueError(
+                f"parameter {name!r} has no default bounds; give them as {name}=LOW:HIGH"
+            )
+        out[name] = MACHINABLE[kind]
+    return out
+
+
+@dataclass(frozen=True)
+class Box:
+    """Bounds `{name: (low, high)}` and the reparametrisation x(u) (module docstring)."""
+
+    bounds: Mapping[str, tuple[float, float]]
+
+    def __post_init__(self):
+        for name, (lo, hi) in self.bounds.items():
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                raise ValueError(
+                    f"bounds of {name!r} = ({lo!r}, {hi!r}) are invalid: need finite low < high"
+                )
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(self.bounds)
+
+    def to_params(self, u) -> dict:
+        out = {}
+        for i, (name, (lo, hi)) in enumerate(self.bounds.items()):
+            s = jax.nn.sigmoid(u[i])
+            if lo > 0:
+                value = jnp.exp(math.log(lo) + (math.log(hi) - math.log(lo)) * s)
+            else:
+                value = lo + (hi - lo) * s
+            out[name] = jnp.clip(value, lo, hi)  # exp(ln lo) may round below lo
+        return out
+
+    def from_params(self, x: Mapping) -> jax.Array:
+        """Inverse of `to_params`; `x` must lie strictly inside the box."""
+        u = []
+        for name, (lo, hi) in self.bounds.items():
+            value = float(x[name])
+            if not lo < value < hi:
+                raise ValueError(
+                    f"start value {name} = {value!r} must lie strictly inside ({lo}, {hi})"
+                )
+            if lo > 0:
+                s = (math.log(value) - math.log(lo)) / (math.log(hi) - math.log(lo))
+            else:
+                s = (value - lo) / (hi - lo)
+            u.append(math.log(s / (1 - s)))
+        return jnp.asarray(u, dtype=float)
+
+
+class DesignProblem:
+    """J(x) = objective(deployment of `scene` with parameters `fixed` ∪ x) for design parameters
+    x (a dict of some of the scene's parameters).
+
+    **Arguments:**
+    - `scene`, `objective`, `t_end`, `n_save`: the run (saved times equally spaced).
+    - `fixed`: other parameter values (defaults otherwise).
+    - `ideal_scene`: the reference mechanism (default `type(scene)(ideal=True)` when the
+      scene has that option; `None` otherwise: deviations are the raw channels).
+    - `control`: step-control overrides.
+    - `adjoint`: a diffrax adjoint for derivatives (default reverse mode with checkpointing;
+      `diffrax.ForwardMode()` for forward mode, cheaper for a few parameters).
+    """
+
+    def __init__(
+        self,
+        scene: Scene,
+        objective: Objective,
+        t_end: float,
+        *,
+        n_save: int = 1601,
+        fixed: Mapping | None = None,
+        ideal_scene: Scene | None | str = "auto",
+        control: Mapping | None = None,
+        lock_angle: float | None = None,
+        adjoint=None,
+    ):
+        self.scene, self.objective, self.t_end = scene, objective, float(t_end)
+        self.adjoint = adjoint
+        self.fixed = scene.resolve_params(fixed)
+        self.control = dict(control or {})
+        self.ts = np.linspace(0.0, self.t_end, n_save)
+        if ideal_scene == "auto":
+            ideal_scene = type(scene)(ideal=True) if hasattr(scene, "ideal") else None
+        self.ideal_scene = ideal_scene
+        self.ideal = None
+        self.ideal_status = "none"
+        if ideal_scene is not None:
+            shared = {k: v for k, v in self.fixed.items() if k in ideal_scene.params}
+            p = ideal_scene.resolve_params(shared)
+            trajectory = run_scene(ideal_scene, p, self.t_end, ts=self.ts, control=self.control)
+            self.ideal_status = trajectory.status()
+            if not trajectory.ok:
+                raise RuntimeError(f"ideal reference run {self.ideal_status}")
+            self.ideal = {
+                k: np.asarray(v)
+                for k, v in ideal_scene.channels(ideal_scene.build(p), trajectory).items()
+            }
+        if lock_angle is None:
+            from .scenes.deploy_array import GEOMETRY
+
+            lock_angle = GEOMETRY["latch"]["engage_alpha"]
+        reference = self.ideal if self.ideal is not None else None
+        self.lock_time = (
+            ideal_lock_time(self.ts, reference["alpha"], lock_angle)
+            if reference is not None and "alpha" in reference
+            else 0.0
+        )
+        if not math.isfinite(self.lock_time):
+            raise ValueError(f"t_end = {self.t_end} s: the ideal mechanism does not lock by then")
+
+    def params(self, x: Mapping) -> dict:
+        unknown = [k for k in x if k not in self.fixed]
+        if unknown:
+            raise ValueError(
+                f"unknown parameter {unknown[0]!r} for scene {self.scene.name!r}; valid: "
+                + ", ".join(sorted(self.fixed))
+            )
+        return {**self.fixed, **x}
+
+    def deployment(self, x: Mapping, trajectory=None):
+        """`(Deployment, trajectory)` for design x (runs the simulation unless given)."""
+        params = self.params(x)
+        if trajectory is None:
+            options = {} if self.adjoint is None else {"adjoint": self.adjoint}
+            trajectory = run_scene(
+                self.scene, params, self.t_end, ts=self.ts, control=self.control, **options
+            )
+        channels = self.scene.channels(self.scene.build(params), trajectory)
+        return Deployment(self.ts, self.lock_time, channels, self.ideal), trajectory
+
+    def evaluate(self, x: Mapping):
+        """`(J, parts, ok)`: the objective, each term's feature, and the run's success flag
+        (traceable in x)."""
+        dep, trajectory = self.deployment(x)
+        ok = trajectory.result == dfx.RESULTS.successful
+        return self.objective(dep), self.objective.parts(dep), ok
+
+    def __call__(self, x: Mapping):
+        return self.evaluate(x)[0]
+
+
+def evaluate_batch(problem: DesignProblem, cases) -> dict:
+    """J and its parts for many designs as one vmapped run (`simulate_batch`).
+
+    `cases`: `{name: (B,) values}` of design parameters. **Returns:** `{"objective": (B,),
+    "parts": {label: (B,)}, "ok": (B,), "status": [str]}` (numpy).
+    """
+    batch = simulate_batch(
+        problem.scene,
+        cases,
+        problem.t_end,
+        fixed=problem.fixed,
+        ts=problem.ts,
+        control=problem.control,
+    )
+    varied = batch.varied
+
+    def one(values, trajectory):
+        x = dict(zip(varied, values, strict=True))
+        dep, _ = problem.deployment(x, trajectory)
+        return problem.objective(dep), problem.objective.parts(dep)
+
+    values = tuple(jnp.asarray(batch.params[k]) for k in varied)
+    if varied:
+        objective, parts = jax.jit(jax.vmap(one))(values, batch.trajectory)
+    else:
+        objective, parts = jax.vmap(lambda tr: one((), tr))(batch.trajectory)
+    return {
+        "objective": np.asarray(objective),
+        "parts": {k: np.asarray(v) for k, v in parts.items()},
+        "ok": batch.ok,
+        "status": batch.statuses(),
+        "params": {k: np.asarray(v) for k, v in batch.params.items()},
+    }
+
+
+@dataclass(frozen=True)
+class Scatter:
+    """Gaussian scatter of design parameters: manufacturing tolerances (robust design) or a
+    small numerical smoothing (nominal design), drawn with a seed.
+
+    `relative`: `{name: s}`, x_i = x e^{s ξ_i} (log-normal: roughness is specified as a
+    ratio); `absolute`: `{name: s}`, x_i = x + s ξ_i (a clearance tolerance in metres, s =
+    tolerance/3 for a ±3σ band), floored at 1 % of x; ξ_i ~ N(0, 1). In the coordinate
+    y = ln x (relative) or y = x (absolute) the scatter is y + s ξ. `nominal`: values of
+    scattered parameters that are not design variables (e.g. a clearance fixed by the
+    drawing but made with a tolerance).
+    """
+
+    relative: Mapping[str, float] = field(default_factory=dict)
+    absolute: Mapping[str, float] = field(default_factory=dict)
+    pairs: int = 4
+    seed: int = 0
+    nominal: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self):
+        for name, s in {**self.relative, **self.absolute}.items():
+            if not (math.isfinite(s) and s > 0):
+                raise ValueError(f"scatter of {name!r} = {s!r} is invalid: it must be > 0")
+        if self.pairs < 1:
+            raise ValueError(f"pairs = {self.pairs!r} is invalid: it must be ≥ 1")
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return (*self.relative, *self.absolute)
+
+    def scale(self, name: str) -> float:
+        return self.relative.get(name, self.absolute.get(name))
+
+    def draws(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """Standard normal draws `{name: (pairs,)}`."""
+        return {name: rng.standard_normal(self.pairs) for name in self.names}
+
+    def antithetic(self, x: Mapping[str, float], draws: Mapping) -> dict[str, np.ndarray]:
+        """The 2M designs x ⊕ (+s ξ_i) (first M) and x ⊕ (−s ξ_i) (last M), `{name: (2M,)}`."""
+        out = {}
+        for name, value in {**self.nominal, **x}.items():
+            if name in self.relative:
+                step = self.relative[name] * draws[name]
+                out[name] = value * np.exp(np.concatenate([step, -step]))
+            elif name in self.absolute:
+                step = self.absolute[name] * draws[name]
+                out[name] = np.maximum(value + np.concatenate([step, -step]), 0.01 * value)
+            else:
+                out[name] = np.full(2 * self.pairs, float(value))
+        return out
+
+    def estimate(self, values: np.ndarray, draws: Mapping) -> tuple[float, dict[str, float]]:
+        """Mean and gradient of the smoothed objective from the 2M values at `antithetic`:
+
+        J_s(y) = E_ξ[J(y + s ξ)],  Ĵ_s = (1/2M) Σ_i (J⁺_i + J⁻_i),
+        ∂J_s/∂y_k ≈ (1/2M s_k) Σ_i (J⁺_i − J⁻_i) ξ_ik
+
+        (Stein's identity ∇E[J(y + sξ)] = E[J(y + sξ) ξ]/s for Gaussian ξ, with antithetic
+        pairs to cancel the even part of J; Nesterov & Spokoiny 2017, Found. Comput. Math.
+        17:527). Unbiased for ∇J_s whatever the roughness of J at scales below s.
+        """
+        m = self.pairs
+        plus, minus = values[:m], values[m:]
+        gradient = {
+            name: float(np.sum((plus - minus) * draws[name]) / (2 * m * self.scale(name)))
+            for name in self.names
+        }
+        return float(np.mean(values)), gradient
+
+
+class BatchObjective:
+    """J for a batch of designs `{name: (B,)}` as one compiled vmapped run (the program is
+    compiled once per batch size)."""
+
+    def __init__(self, problem: DesignProblem):
+        self.problem = problem
+        self._run = jax.jit(jax.vmap(problem.evaluate))
+
+    def __call__(self, designs: Mapping) -> tuple[np.ndarray, dict, np.ndarray]:
+        values, parts, ok = self._run({k: jnp.asarray(v, dtype=float) for k, v in designs.items()})
+        return np.asarray(values), {k: np.asarray(v) for k, v in parts.items()}, np.asarray(ok)
+
+
+def expected_objective(batch: Callable, x: Mapping, scatter: Scatter, rng) -> dict:
+    """Ê[J] under `scatter` around x and its gradient (`Scatter.estimate`), from 2M designs
+    evaluated as one batch. `batch(designs) -> (values, parts, ok)` (e.g. `BatchObjective`).
+    **Returns:** `{"value", "gradient" (in y), "parts" (means), "ok", "values"}`."""
+    draws = scatter.draws(rng)
+    designs = scatter.antithetic(x, draws)
+    values, parts, ok = batch(designs)
+    value, gradient = scatter.estimate(values, draws)
+    return {
+        "value": value,
+        "gradient": gradient,
+        "parts": {k: float(np.mean(v)) for k, v in parts.items()},
+        "ok": bool(np.all(ok)) and bool(np.all(np.isfinite(values))),
+        "values": values,
+        "designs": designs,
+    }
+
+
+@dataclass
+class OptimizeResult:
+    """History of an optimisation: per iteration the design, J, dJ/dx and the parts."""
+
+    names: tuple[str, ...]
+    x: list = field(default_factory=list)
+    objective: list = field(default_factory=list)
+    gradient: list = field(default_factory=list)
+    parts: list = field(default_factory=list)
+    wall_time: list = field(default_factory=list)
+    ok: list = field(default_factory=list)
+    stochastic: bool = False
+
+    @property
+    def best(self) -> int:
+        """The last iterate for a stochastic (smoothed) run, whose objective values are noisy
+        estimates; otherwise the iterate with the lowest successful objective."""
+        if self.stochastic:
+            return len(self.x) - 1
+        values = np.where(np.asarray(self.ok), np.asarray(self.objective), np.inf)
+        return int(np.argmin(values))
+
+    @property
+    def optimum(self) -> dict[str, float]:
+        return dict(self.x[self.best])
+
+    def to_json(self) -> dict:
+        return {
+            "names": list(self.names),
+            "optimum": self.optimum,
+            "optimum_objective": self.objective[self.best],
+            "optimum_iteration": self.best,
+            "stochastic": self.stochastic,
+            "history": [
+                {
+                    "iteration": i,
+                    "x": self.x[i],
+                    "objective": self.objective[i],
+                    "gradient": self.gradient[i],
+                    "parts": self.parts[i],
+                    "ok": self.ok[i],
+                    "wall_time_s": self.wall_time[i],
+                }
+                for i in range(len(self.x))
+            ],
+        }
+
+
+def optimize(
+    loss: Callable,
+    x0: Mapping[str, float],
+    bounds: Mapping[str, tuple[float, float]],
+    *,
+    steps: int = 20,
+    learning_rate: float = 0.3,
+    optimizer=None,
+    smoothing: Scatter | None = None,
+    callback: Callable | None = None,
+) -> OptimizeResult:
+    """Minimise over the box `bounds` from `x0` by gradient steps in the reparametrised u
+    (module docstring), with optax.
+
+    **Arguments:**
+    - `loss`: with `smoothing=None`, x ↦ J or x ↦ `(J, parts, ok)` (as
+      `DesignProblem.evaluate`), traceable in x and differentiated by JAX (pathwise).
+      With a `smoothing` (`Scatter`), a batch function `designs ↦ (values, parts, ok)` (as
+      `BatchObjective`): J is replaced by its Gaussian smoothing / expectation under the
+      scatter and the gradient is estimated from 2M antithetic samples per iteration
+      (`Scatter.estimate`), fresh draws each iteration from `smoothing.seed` (a stochastic
+      gradient method). This is the robust design when the scatter is the manufacturing
+      tolerance, and the remedy for objectives that are rough below some scale.
+    - `steps`: number of objective/gradient evaluations.
+    - `optimizer`: an optax `GradientTransformation` (default `optax.adam(learning_rate)`).
+    - `callback(i, result)`: called after each evaluation (progress display).
+
+    **Returns:** `OptimizeResult`; `.optimum` is the best successful iterate (for a smoothed
+    objective, whose values are noisy estimates: the last iterate).
+    """
+    import optax
+
+    box = Box(dict(bounds))
+    optimizer = optax.adam(learning_rate) if optimizer is None else optimizer
+    x_of_u = jax.jit(box.to_params)
+    # dx/du (diagonal: each x_i depends on u_i only).
+    dx_du = jax.jit(
+        lambda w: jnp.diag(jax.jacfwd(lambda v: jnp.stack(list(box.to_params(v).values())))(w))
+    )
+
+    if smoothing is None:
+
+        def reduced(u):
+            out = loss(box.to_params(u))
+            if not isinstance(out, tuple):
+                out = (out, {}, jnp.asarray(True))
+            value, parts, ok = out
+            return value, (parts, ok)
+
+        value_and_grad = jax.jit(jax.value_and_grad(reduced, has_aux=True))
+    else:
+        unknown = [n for n in smoothing.names if n not in (*box.names, *smoothing.nominal)]
+        if unknown:
+            raise ValueError(
+                f"smoothing: {unknown[0]!r} is neither a design parameter nor in its nominal"
+            )
+        rng = np.random.default_rng(smoothing.seed)
+
+    u = box.from_params(x0)
+    state = optimizer.init(u)
+    result = OptimizeResult(box.names, stochastic=smoothing is not None)
+    for i in range(steps):
+        start = time.perf_counter()
+        x = {k: float(v) for k, v in x_of_u(u).items()}
+        jac = np.asarray(dx_du(u))
+        if smoothing is None:
+            (value, (parts, ok)), grad_u = value_and_grad(u)
+            grad_u = np.asarray(grad_u)
+            grad_x = grad_u / jac
+            value, ok = float(value), bool(ok)
+            parts = {k: float(v) for k, v in parts.items()}
+        else:
+            est = expected_objective(loss, x, smoothing, rng)
+            value, ok, parts = est["value"], est["ok"], est["parts"]
+            # ∂J/∂y → ∂J/∂x (y = ln x for relative scatter) → ∂J/∂u; unsmoothed names: 0.
+            grad_x = np.array(
+                [
+                    est["gradient"].get(n, 0.0) / (x[n] if n in smoothing.relative else 1.0)
+                    for n in box.names
+                ]
+            )
+            grad_u = grad_x * jac
+        ok = ok and bool(np.all(np.isfinite(grad_u)))
+        result.x.append(x)
+        result.objective.append(value)
+        result.gradient.append(dict(zip(box.names, grad_x.tolist(), strict=True)))
+        result.parts.append(parts)
+        result.ok.append(ok)
+        result.wall_time.append(time.perf_counter() - start)
+        if callback is not None:
+            callback(i, result)
+        if i == steps - 1:
+            break
+        if not ok:
+            raise RuntimeError(
+                f"optimize: iteration {i} at {x} failed (simulation or gradient not finite)"
+            )
+        updates, state = optimizer.update(jnp.asarray(grad_u), state, u)
+        u = optax.apply_updates(u, updates)
+    return result

@@ -1,0 +1,200 @@
+"""Bounded optimisation: the reparametrisation, convergence to known optima (inside the box and
+on its boundary), the smoothed gradient estimator against the closed form for a quadratic, and
+recovery of a pendulum's length from its motion (pathwise and smoothed gradients)."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+
+from jaxdeploy.batch import run_scene
+from jaxdeploy.optimize import MACHINABLE, Box, Scatter, optimize
+from jaxdeploy.scenes import DeployArray, Pendulum
+
+BOUNDS = {"panel1_ra": MACHINABLE["ra"], "panel1_clearance": MACHINABLE["clearance"]}
+
+
+def test_box_round_trip_stays_inside_and_refuses_bad_input():
+    box = Box({**BOUNDS, "restitution": (0.0, 1.0)})
+    x = {"panel1_ra": 1.6e-6, "panel1_clearance": 5e-5, "restitution": 0.3}
+    back = box.to_params(box.from_params(x))
+    for k in x:
+        assert float(back[k]) == pytest.approx(x[k], rel=1e-12)
+    for u in (-60.0, 60.0):
+        p = box.to_params(jnp.full(3, u))
+        for k, (lo, hi) in box.bounds.items():
+            assert lo <= float(p[k]) <= hi
+    with pytest.raises(ValueError, match="panel1_ra"):
+        box.from_params({**x, "panel1_ra": 7e-6})
+    with pytest.raises(ValueError, match="low < high"):
+        Box({"c": (2.0, 1.0)})
+
+
+def _log_quadratic(target):
+    """J = Σ (ln x − ln x*)² (a bowl in the log-coordinates the box uses)."""
+
+    def loss(x):
+        return sum((jnp.log(x[k]) - math.log(target[k])) ** 2 for k in target)
+
+    return loss
+
+
+def test_adam_finds_an_interior_optimum_and_stops_at_the_bound():
+    inside = {"panel1_ra": 3.2e-6, "panel1_clearance": 2e-5}
+    start = {"panel1_ra": 0.8e-6, "panel1_clearance": 1e-4}
+    result = optimize(_log_quadratic(inside), start, BOUNDS, steps=150, learning_rate=0.2)
+    for k in inside:
+        assert result.optimum[k] == pytest.approx(inside[k], rel=1e-3)
+    assert result.objective[result.best] < 1e-5 < result.objective[0]
+    # The optimum outside the box (Ra 20 µm): the iterate stops at the upper bound 6.3 µm.
+    outside = {"panel1_ra": 20e-6, "panel1_clearance": 2e-5}
+    result = optimize(_log_quadratic(outside), start, BOUNDS, steps=150, learning_rate=0.3)
+    assert result.optimum["panel1_ra"] == pytest.approx(6.3e-6, rel=1e-2)
+    assert result.optimum["panel1_ra"] <= 6.3e-6
+
+
+def test_smoothed_gradient_of_a_quadratic_matches_its_closed_form():
+    """J(y) = a·y + ½ Σ b_k y_k², y = (ln x_1, x_2): E[J(y + sξ)] = J(y) + ½ Σ b_k s_k² and
+    ∇E[J(y + sξ)] = a + b y exactly; the estimator's error is statistical (checked at 5 σ)."""
+    a, b = np.array([0.7, -2.0e4]), np.array([3.0, 4.0e8])
+    x = {"p": 2.0, "q": 3e-5}
+    scatter = Scatter(relative={"p": 0.1}, absolute={"q": 1e-6}, pairs=20000, seed=1)
+    draws = scatter.draws(np.random.default_rng(scatter.seed))
+    designs = scatter.antithetic(x, draws)
+    y = np.stack([np.log(designs["p"]), designs["q"]], axis=-1)
+    values = y @ a + 0.5 * (y**2) @ b
+    value, gradient = scatter.estimate(values, draws)
+    y0 = np.array([math.log(2.0), 3e-5])
+    s = np.array([0.1, 1e-6])
+    exact = a + b * y0
+    assert value == pytest.approx(y0 @ a + 0.5 * y0**2 @ b + 0.5 * (b * s**2).sum(), rel=1e-3)
+    # Antithetic pairs cancel the even part; the odd part's estimate has sd |b_k y_k| ... /√M.
+    for k, name in enumerate(("p", "q")):
+        sd = np.sqrt(np.sum(exact**2 * (s / s[k]) ** 2) / scatter.pairs)
+        assert abs(gradient[name] - exact[k]) < 5 * sd
+    with pytest.raises(ValueError, match="must be > 0"):
+        Scatter(relative={"p": 0.0})
+
+
+def _pendulum_fit():
+    """Loss: mean squared difference of the angle from a reference run of length 1.3 m."""
+    scene = Pendulum()
+    base = scene.resolve_params({"initial_angle": -0.4})
+    reference = run_scene(scene, {**base, "length": 1.3}, 0.6, n_save=31).q[:, 2]
+
+    def loss(x):
+        q = run_scene(scene, {**base, **x}, 0.6, n_save=31).q[:, 2]
+        return jnp.mean((q - reference) ** 2)
+
+    return loss
+
+
+def test_pendulum_length_recovered_by_pathwise_and_smoothed_gradients():
+    loss = _pendulum_fit()
+    bounds = {"length": (0.5, 3.0)}
+    schedule = optax.exponential_decay(0.1, transition_steps=10, decay_rate=0.6)
+    pathwise = optimize(loss, {"length": 2.2}, bounds, steps=40, optimizer=optax.adam(schedule))
+    assert pathwise.optimum["length"] == pytest.approx(1.3, rel=2e-3)
+    # dJ/dx reported by optimize equals central differences of the loss.
+    x = pathwise.x[3]["length"]
+    fd = (float(loss({"length": x + 1e-6})) - float(loss({"length": x - 1e-6}))) / 2e-6
+    assert pathwise.gradient[3]["length"] == pytest.approx(fd, rel=1e-5)
+
+    batch = jax.jit(jax.vmap(loss))
+
+    def batch_loss(designs):
+        values = np.asarray(batch({k: jnp.asarray(v) for k, v in designs.items()}))
+        return values, {}, np.isfinite(values)
+
+    smoothing = Scatter(relative={"length": 0.02}, pairs=4, seed=3)
+    smoothed = optimize(
+        batch_loss,
+        {"length": 2.2},
+        bounds,
+        steps=50,
+        optimizer=optax.adam(optax.exponential_decay(0.1, transition_steps=15, decay_rate=0.6)),
+        smoothing=smoothing,
+    )
+    # Smoothing by 2 % in ln L shifts the minimiser by O(s²) only; the rest is SGD noise
+    # (4 pairs per step, learning rate 0.1 → ~0.02 in u at the end).
+    assert smoothed.optimum["length"] == pytest.approx(1.3, rel=5e-2)
+
+
+def test_optimize_command_refuses_bad_input_before_running(tmp_path, capsys):
+    from jaxdeploy.cli import main
+
+    out = str(tmp_path / "o")
+    cases = [
+        (["--param", "panel1_roughness"], "unknown parameter 'panel1_roughness'"),
+        (["--param", "restitution"], "no default bounds"),
+        (["--param", "restitution=0.9:0.1"], "low < high"),
+        (["--objective", "panel1:loudness=1"], "unknown"),
+        (["--start", "restitution=0.5"], "not a design parameter"),
+    ]
+    for extra, message in cases:
+        assert main(["optimize", "--out", out, *extra]) == 2
+        assert message in capsys.readouterr().err
+    (tmp_path / "full").mkdir()
+    (tmp_path / "full" / "result.json").write_text("{}")
+    assert main(["optimize", "--out", str(tmp_path / "full")]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_optimize_command_end_to_end_on_a_short_deployment(tmp_path):
+    """Two smoothed steps on panel 2's Ra over a 0.65 s deployment: writes the optimum, the
+    history and the plot; the design stays inside the machinable box."""
+    import json
+
+    from jaxdeploy.cli import main
+
+    out = tmp_path / "opt"
+    code = main(
+        [
+            "optimize",
+            "--objective",
+            "panel2:peak_vibration=1",
+            "--param",
+            "panel2_ra",
+            "--t-end",
+            "0.65",
+            "--n-save",
+            "1301",
+            "--steps",
+            "2",
+            "--pairs",
+            "1",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
+    assert code == 0
+    record = json.loads((out / "result.json").read_text())
+    assert len(record["history"]) == 2 and (out / "history.png").exists()
+    assert 0.2e-6 <= record["optimum"]["panel2_ra"] <= 6.3e-6
+    assert record["seed"] == 0 and "jax" in record["versions"]
+
+
+@pytest.mark.slow
+def test_design_problem_batch_equals_single_runs():
+    """evaluate_batch (one vmapped run) equals separate evaluations of the same designs."""
+    from jaxdeploy.objectives import parse_objective
+    from jaxdeploy.optimize import DesignProblem, evaluate_batch
+
+    problem = DesignProblem(
+        DeployArray(),
+        parse_objective(["panel2:peak_vibration=1", "panel1:deployment_deviation=1"]),
+        0.65,
+        n_save=1301,
+    )
+    cases = {"panel2_ra": [0.8e-6, 3.2e-6]}
+    batch = evaluate_batch(problem, cases)
+    assert list(batch["ok"]) == [True, True]
+    for i, ra in enumerate(cases["panel2_ra"]):
+        value, parts, ok = problem.evaluate({"panel2_ra": ra})
+        assert bool(ok)
+        assert batch["objective"][i] == pytest.approx(float(value), rel=1e-9)
