@@ -82,9 +82,8 @@ def run(args) -> int:
     import time
 
     import diffrax as dfx
-    import numpy as np
 
-    from ..io import atomic_write_json, prepare_output_dir, run_metadata
+    from ..io import atomic_write_json, check_output_dir, prepare_output_dir, run_metadata
     from ..objectives import parse_objective
     from ..optimize import (
         BatchObjective,
@@ -121,7 +120,7 @@ def run(args) -> int:
             raise ValueError(f"--steps = {args.steps}: must be ≥ 1")
         if not args.t_end > 0:
             raise ValueError(f"--t-end = {args.t_end}: must be > 0 (s)")
-        prepare_output_dir(args.out, args.overwrite)
+        check_output_dir(args.out, args.overwrite)  # refuse before any work
     except (ValueError, FileExistsError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
@@ -202,8 +201,9 @@ def run(args) -> int:
         **result.to_json(),
         "versions": run_metadata(),
     }
+    prepare_output_dir(args.out, args.overwrite)
     atomic_write_json(f"{args.out}/result.json", record)
-    figure = _plot(result, args.out, np)
+    figure = _plot(result, args.out)
     print(
         "optimum: "
         + ", ".join(f"{k}={v:.4g}" for k, v in result.optimum.items())
@@ -213,13 +213,15 @@ def run(args) -> int:
     return 0
 
 
-def _plot(result, out, np):
+def _plot(result, out):
     import os
 
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from ..io import atomic_savefig
 
     names = result.names
     fig, axes = plt.subplots(1 + len(names), 1, figsize=(6, 2.0 * (1 + len(names))), sharex=True)
@@ -231,12 +233,6 @@ def _plot(result, out, np):
     axes[-1].set_xlabel("iteration")
     fig.tight_layout()
     path = os.path.join(out, "history.png")
-    import io
-
-    from ..io import atomic_write_bytes
-
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=110)
+    atomic_savefig(fig, path, dpi=110)
     plt.close(fig)
-    atomic_write_bytes(path, buffer.getvalue())
     return path
