@@ -60,9 +60,11 @@ TOLERANCE = Scatter(
     seed=11,
     nominal={"panel1_clearance": 5e-5, "panel2_clearance": 5e-5},
 )
-STEPS = 5
+# A second run smoothing at about half a grid step (s = 0.5 in ln Ra), more pairs.
+SMOOTHING_WIDE = Scatter(relative={n: 0.5 for n in NAMES}, pairs=3, seed=8)
+STEPS = 4
 LEARNING_RATE = 0.25
-COMPARE_PAIRS = 3
+COMPARE_PAIRS = 2
 
 
 def problem():
@@ -145,6 +147,10 @@ def phase_optimize():
     _optimise("nominal", SMOOTHING, "optimize_nominal.json")
 
 
+def phase_optimize_wide():
+    _optimise("wide", SMOOTHING_WIDE, "optimize_wide.json")
+
+
 def phase_robust():
     _optimise("robust", TOLERANCE, "optimize_robust.json")
     if os.path.exists(_path("robust_compare.json")):
@@ -192,8 +198,18 @@ def phase_report():
     i, j = np.unravel_index(np.argmin(np.where(ok, J, np.inf)), J.shape)
     grid_best = {"panel1_ra": GRID_RA[i], "panel2_ra": GRID_RA[j]}
     nominal = json.load(open(_path("optimize_nominal.json")))
+    wide = json.load(open(_path("optimize_wide.json")))
     robust = json.load(open(_path("optimize_robust.json")))
     compare = json.load(open(_path("robust_compare.json")))
+    # The grid smoothed like the wide run's objective: Gaussian weights in ln Ra with
+    # s = 0.5, normalised over the grid points (a discrete stand-in for E[J(y + s ξ)]).
+    s_wide = SMOOTHING_WIDE.relative[NAMES[0]]
+    y = np.log(GRID_RA)
+    w = np.exp(-0.5 * ((y[:, None] - y[None, :]) / s_wide) ** 2)
+    w /= w.sum(axis=1, keepdims=True)
+    J_smooth = w @ J @ w.T
+    si, sj = np.unravel_index(np.argmin(J_smooth), J_smooth.shape)
+    smooth_best = {"panel1_ra": GRID_RA[si], "panel2_ra": GRID_RA[sj]}
     manifest = grid["manifest"]
     grid_time = sum(c["wall_time_s"] for c in manifest["chunks"])
 
@@ -201,7 +217,12 @@ def phase_report():
     lg = np.log10(GRID_RA * 1e6)
     mesh = ax.pcolormesh(lg, lg, J.T, shading="nearest", cmap="viridis")
     fig.colorbar(mesh, label="objective J (paper preset)")
-    for res, style, label in ((nominal, "w.-", "nominal (smoothed)"), (robust, "r.-", "robust")):
+    runs = (
+        (nominal, "w.-", "smoothed s=0.15"),
+        (wide, "c.-", "smoothed s=0.5"),
+        (robust, "r.-", "robust"),
+    )
+    for res, style, label in runs:
         path = np.array([[h["x"]["panel1_ra"], h["x"]["panel2_ra"]] for h in res["history"]])
         ax.plot(*np.log10(path.T * 1e6), style, label=f"{label} path")
     ax.plot(
@@ -295,6 +316,19 @@ def phase_report():
         smooth_pairs=SMOOTHING.pairs,
         lr=LEARNING_RATE,
         nominal_time=sum(h["wall_time_s"] for h in nominal["history"]),
+        wide_opt=um(wide["optimum"]),
+        wide_J=wide["history"][-1]["objective"],
+        wide_pairs=SMOOTHING_WIDE.pairs,
+        wide_time=sum(h["wall_time_s"] for h in wide["history"]),
+        smooth_best=um(smooth_best),
+        smooth_J=J_smooth[si, sj],
+        noise=float(np.std(J - J_smooth)),
+        smooth_range=float(J_smooth.max() - J_smooth.min()),
+        est_se=float(np.std(J - J_smooth))
+        / (SMOOTHING.relative[NAMES[0]] * math.sqrt(SMOOTHING.pairs)),
+        f_low=float(np.min(grid["feature_panel1:dominant_frequency"])),
+        f_high=float(np.max(grid["feature_panel1:dominant_frequency"])),
+        f_median=float(np.median(grid["feature_panel1:dominant_frequency"])),
         robust_opt=um(robust["optimum"]),
         robust_steps=len(robust["history"]),
         robust_pairs=TOLERANCE.pairs,
@@ -381,17 +415,33 @@ Grid minimum: **{grid_best}** (J = {grid_J:.3f}).
 
 ![features over the grid](figures/design_features.png)
 
+The table is rough: the rms difference between J and its Gaussian smoothing at s = 0.5 over
+the grid is {noise:.2f}, against a range of {smooth_range:.2f} of the smoothed J across the
+grid. Panel 1's dominant post-lock frequency is {f_median:.0f} Hz (median over the grid)
+but jumps to up to {f_high:.0f} Hz at a few designs where a second spectral peak is nearly as
+high: the soft argmax follows whichever peak is higher, so that term is the roughest. The grid
+smoothed at s = 0.5 in ln Ra (Gaussian weights over the grid points) has its minimum at
+**{smooth_best}** (J_s = {smooth_J:.3f}).
+
 ## Gradient-based optimum
 
 Adam (learning rate {lr} in the reparametrised coordinate) from the paper's design
-({start}), {nominal_steps} steps of the smoothed gradient ({nominal_sims} simulations,
-{nominal_time:.0f} s): **{nominal_opt}** (last iterate; smoothed J ≈ {nominal_J:.3f}).
+({start}), {nominal_steps} steps each:
 
-Check of the first gradient against the grid: the estimated dJ/d ln Ra at the start is
-({est_slope}); the grid's central difference over one grid step there (bilinear
-interpolation) is ({grid_slope}). The grid is coarse (a factor {step_ratio:.2f} per step) and
-J is rough below that scale, so agreement in sign and order of magnitude is what can be
-expected.
+* smoothing s = {smoothing} in ln Ra, {smooth_pairs} antithetic pairs per step
+  ({nominal_sims} simulations, {nominal_time:.0f} s): **{nominal_opt}** (last iterate;
+  J_s estimate {nominal_J:.3f});
+* smoothing s = 0.5, {wide_pairs} pairs per step ({wide_time:.0f} s): **{wide_opt}**
+  (J_s estimate {wide_J:.3f}).
+
+Check of the first gradient (s = 0.15) against the grid: the estimated dJ/d ln Ra at the start
+is ({est_slope}); the grid's central difference over one grid step there (bilinear
+interpolation) is ({grid_slope}). With roughness {noise:.2f} (rms, above) the Stein estimate
+from {smooth_pairs} pairs at s = {smoothing} has a standard error of roughly
+{noise:.2f}/(s √M) ≈ {est_se:.1f} per component, i.e. comparable to or larger than these
+slopes: a handful of steps with few samples cannot resolve trends this weak, and the runs here
+are too short to converge. Where the paths end against the grid minimum (and the
+smoothed-grid minimum) is the brute-force check; see "Verdict" below.
 
 ![objective history](figures/design_history.png)
 
@@ -409,10 +459,18 @@ for all; ± is the standard error over pairs):
 |---|---|---|---|---|
 {cmp_rows}
 
-## Against the paper's advice
+## Verdict and the paper's advice
 
-The paper recommends {paper}. Our grid minimum is {grid_best}, the gradient-based optimum
-{nominal_opt}, the robust optimum {robust_opt}. Caveats on both sides: the paper's Fig. 8 and
+The paper recommends {paper}. Our grid minimum is {grid_best}, the smoothed-grid minimum
+{smooth_best}; the gradient-based runs ended at {nominal_opt} (s = 0.15) and {wide_opt}
+(s = 0.5), the robust run at {robust_opt}. With 4 steps of 4–6 simulations each they are
+not converged, so the agreement "within grid resolution" asked for is **not** demonstrated by
+this budget. What the study does show is that this objective is rough at the scale of the
+paper's own comparisons (factors of 2 in Ra), which suggests that ranking Ra 0.8, 1.6 and
+3.2 µm from single runs, as the paper did, is sensitive to that roughness; averaged
+(smoothed or tolerance-weighted) objectives are the safer basis for machining advice.
+
+Caveats on both sides: the paper's Fig. 8 and
 Table 2 are missing, so our mechanism (geometry, masses, spring, latch) is a reconstruction
 (docs/deploy_array_geometry.md) and its post-lock dynamics need not match theirs; the paper
 compared three values by eye, with unstated criteria; ours are stated, but they are a reading
@@ -426,7 +484,12 @@ coarse (5 × 5) and clearance was held at 50 µm (4-D designs run the same way:
 def main(argv):
     phases = argv[1:] or ["all"]
     os.makedirs(RESULTS, exist_ok=True)
-    order = {"grid": phase_grid, "optimize": phase_optimize, "robust": phase_robust}
+    order = {
+        "grid": phase_grid,
+        "optimize": phase_optimize,
+        "wide": phase_optimize_wide,
+        "robust": phase_robust,
+    }
     start = time.perf_counter()
     for phase in phases:
         if phase == "all":
@@ -438,7 +501,7 @@ def main(argv):
         elif phase in order:
             order[phase]()
         else:
-            raise SystemExit(f"unknown phase {phase!r}; valid: grid optimize robust report all")
+            raise SystemExit(f"unknown phase {phase!r}; valid: {', '.join(order)} report all")
     print(f"done in {time.perf_counter() - start:.0f} s")
 
 
