@@ -17,6 +17,7 @@ result (the machine is shared).
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 
@@ -65,8 +66,16 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=None, help="write the result as JSON here")
     ap.add_argument("--doc", default=None, help="write a generated markdown page here")
+    ap.add_argument(
+        "--from-json", default=None, help="only rewrite --doc from a stored --out result"
+    )
     args = ap.parse_args(argv)
 
+    if args.from_json:
+        with open(args.from_json) as fh:
+            stored = json.load(fh)
+        atomic_write_bytes(args.doc, page(stored, stored["argv"]).encode())
+        return stored
     scene = get_scene(args.scene)
     table, varied, shared = _stack_cases(
         scene, cases(scene, args.batch, args.spread, args.seed), None
@@ -109,6 +118,7 @@ def main(argv=None):
     result["control"] = step_control(scene)
     result["versions"] = run_metadata()
     result["jaxdeploy_version"] = jaxdeploy.__version__
+    result["argv"] = sys.argv[1:] if argv is None else list(argv)
     print(
         f"{args.scene}, t_end {args.t_end} s: one run {result['single_wall_s']:.3f} s; batch of "
         f"{args.batch} {result['batch_wall_s']:.2f} s = {per_case:.4f} s per case: "
@@ -127,6 +137,7 @@ def row(label, cases, wall, steps, compile_s) -> str:
 
 
 def page(r, argv) -> str:
+    verdict = _verdict(r)
     argv = sys.argv[1:] if argv is None else argv
     command = "PYTHONPATH=. python experiments/batch_throughput.py " + " ".join(argv)
     v = r["versions"]
@@ -145,14 +156,27 @@ compiled ahead of time (`jit(...).lower(...).compile()`), and the timings exclud
 {row("one simulation", 1, r["single_wall_s"], r["single_steps_max"], r["single_compile_s"])}
 {row("vmapped batch", r["batch"], r["batch_wall_s"], r["batch_steps_max"], r["batch_compile_s"])}
 
-**Per simulation, the batch is {r["speedup_per_case"]:.2f}× cheaper** than one simulation
-(target ≥ 2×). {r["batch_ok"]} of {r["batch"]} cases succeeded.
+**Speed-up per simulation: {r["speedup_per_case"]:.2f}** (single-run time over the batch's
+time per case; target ≥ 2). {r["batch_ok"]} of {r["batch"]} cases succeeded. {verdict}
 
 A batch advances as one `while` loop until its slowest case finishes, every case taking every
-step of the batch (finished or easy cases are masked), so its gain comes from amortising the
-per-step overhead of XLA on CPU over many small (21 × 21) systems, and it shrinks when cases of
-very different stiffness share a batch (compare `--spread 1`).
+step of the batch (finished or easy cases are masked), so it pays the step count of its slowest
+case ({r["batch_steps_max"]} against {r["single_steps_max"]} here). Any gain has to come from
+amortising XLA's per-operation overhead on CPU over many small (21 × 21) systems; under `vmap`
+the solver's data-dependent branches and Newton loops also run for the whole batch (both
+branches of a `cond` are evaluated, a `while` runs until the last case converges).
 """
+
+
+def _verdict(r) -> str:
+    if r["speedup_per_case"] >= 2:
+        return "The target is met."
+    return (
+        "**The target is not met**: on this CPU the vmapped batch costs "
+        f"{1 / r['speedup_per_case']:.1f}× more per simulation than single runs, so for "
+        "throughput here run cases one by one (or in small batches) in parallel processes; "
+        "batching still gives one compilation for all cases and the sharding across devices."
+    )
 
 
 if __name__ == "__main__":

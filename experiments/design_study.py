@@ -324,6 +324,13 @@ def phase_report():
         smooth_J=J_smooth[si, sj],
         noise=float(np.std(J - J_smooth)),
         smooth_range=float(J_smooth.max() - J_smooth.min()),
+        dist_nominal=_grid_distance(nominal["optimum"], smooth_best),
+        relation=" and ".join(
+            f"{'smoother' if smooth_best[n] < PAPER[n] else 'rougher'} than the paper's advice "
+            f"for panel {k + 1}"
+            for k, n in enumerate(NAMES)
+        ),
+        dist_wide=_grid_distance(wide["optimum"], smooth_best),
         est_se=float(np.std(J - J_smooth))
         / (SMOOTHING.relative[NAMES[0]] * math.sqrt(SMOOTHING.pairs)),
         f_low=float(np.min(grid["feature_panel1:dominant_frequency"])),
@@ -346,6 +353,11 @@ def phase_report():
     )
     atomic_write_bytes(os.path.join(DOCS, "design.md"), text.encode())
     print("wrote docs/design.md and docs/figures/design_*.png")
+
+
+def _grid_distance(x, y) -> float:
+    step = math.log(GRID_RA[1] / GRID_RA[0])
+    return max(abs(math.log(x[n] / y[n])) for n in NAMES) / step
 
 
 TEMPLATE = """# Choosing hinge roughness per panel (design study)
@@ -463,12 +475,17 @@ for all; ± is the standard error over pairs):
 
 The paper recommends {paper}. Our grid minimum is {grid_best}, the smoothed-grid minimum
 {smooth_best}; the gradient-based runs ended at {nominal_opt} (s = 0.15) and {wide_opt}
-(s = 0.5), the robust run at {robust_opt}. With 4 steps of 4–6 simulations each they are
-not converged, so the agreement "within grid resolution" asked for is **not** demonstrated by
-this budget. What the study does show is that this objective is rough at the scale of the
-paper's own comparisons (factors of 2 in Ra), which suggests that ranking Ra 0.8, 1.6 and
-3.2 µm from single runs, as the paper did, is sensitive to that roughness; averaged
-(smoothed or tolerance-weighted) objectives are the safer basis for machining advice.
+(s = 0.5), the robust run at {robust_opt}. The grid is clear at its own scale: the smoothed
+J spans {smooth_range:.2f} across the grid against a roughness of {noise:.2f}, and by this
+objective the smoothed optimum ({smooth_best}) is {relation}.
+The gradient runs did not get there: after 4 steps they are
+{dist_nominal:.2f} (s = 0.15) and {dist_wide:.2f} (s = 0.5) grid steps from the smoothed-grid
+minimum (largest component, in ln Ra), because with 4–6 simulations per step the gradient
+estimate's noise (≈ {est_se:.1f} per component at s = 0.15) exceeds the slopes. So the check
+"gradient optimum = grid optimum within grid resolution" is **not** passed at this budget;
+more pairs per step (the cost is one batch per step) and more steps are needed, or the
+smoothed grid itself can serve as the answer at this resolution. The robust comparison
+(table above) separates the designs by less than a few standard errors with 2 pairs.
 
 Caveats on both sides: the paper's Fig. 8 and
 Table 2 are missing, so our mechanism (geometry, masses, spring, latch) is a reconstruction
