@@ -121,6 +121,9 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
     - `baumgarte`: ω_b [rad/s] ≥ 0 of the stabilisation (default 0: projection only).
     - `project`: project onto the constraint manifold after each step (default True).
     - `resolve_switches`: shrink steps at memory switches (default True; module docstring).
+      A switch is any memory leaf that `Mechanism.memory_after_step` changes; a memory that
+      changes after every step (e.g. `jaxdeploy.mechanism.metered`'s energy meters) would
+      count as a switch every step — use `resolve_switches=False` with such mechanisms.
 
     Dense output is the cubic Hermite interpolant of `q` (with `q̇`) and `q̇` (with `q̈`),
     linear for `q̈`, `λ` and memory, as for `GeneralizedAlpha`.
