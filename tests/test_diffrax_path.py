@@ -32,6 +32,12 @@ def test_unknown_solver_name_is_refused_with_the_valid_names():
     assert "generalized_alpha" in SOLVER_NAMES and "kvaerno3" in SOLVER_NAMES
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="since a376464 jaxdeploy's v⁻ is the largest step-start approach speed of the "
+    "contact, the numpy peer's is δ̇ at the onset event: different models (3.9e-4 c apart "
+    "after the first impact); the peer and the switch estimate must follow (issue 5)",
+)
 def test_kvaerno5_matches_independent_numpy_model_through_first_impact(slider_crank):
     """Against a separately written numpy model (hand-derived Jacobian, v⁻ from an exact
     onset event) solved by scipy DOP853 at 1e-11: the eccentricity and the recorded impact
