@@ -110,14 +110,28 @@ def check_output_dir(path: str, overwrite: bool) -> None:
     the way is refused too. Creates nothing, so it can run before any work is done."""
     if os.path.exists(path) and not os.path.isdir(path):
         raise FileExistsError(f"output path {path!r} exists and is not a folder")
-    if os.path.isdir(path) and os.listdir(path) and not overwrite:
+    if os.path.isdir(path) and _results_in(path) and not overwrite:
         raise FileExistsError(
             f"output folder {path!r} already holds results; pass --overwrite to replace them "
             "or choose another --out"
         )
 
 
+def _is_partial_write(name: str) -> bool:
+    """A temporary file of `atomic_write_bytes` left behind by a killed writer."""
+    return name.startswith(TEMP_PREFIX)
+
+
+def _results_in(path: str) -> list[str]:
+    """Entries of `path` that are results (leftover partial writes are not)."""
+    return [name for name in os.listdir(path) if not _is_partial_write(name)]
+
+
 def prepare_output_dir(path: str, overwrite: bool) -> None:
-    """Create `path`; refuse a non-empty existing folder unless `overwrite`."""
+    """Create `path`; refuse a non-empty existing folder unless `overwrite`. Partial writes
+    left by a killed run (never results: the rename did not happen) are removed."""
     check_output_dir(path, overwrite)
     os.makedirs(path, exist_ok=True)
+    for name in os.listdir(path):
+        if _is_partial_write(name):
+            os.remove(os.path.join(path, name))

@@ -349,3 +349,20 @@ def test_energy_meter_does_not_change_the_dynamics():
     lost = float(balance["dissipated"][-1]) / 0.5
     rebound = -float(runs[1].v[-1, 0])
     assert lost == pytest.approx(1.0 - rebound**2, abs=2e-3)
+
+
+def test_a_leftover_partial_write_is_not_a_result(tmp_path):
+    """A killed writer leaves only its hidden temporary file: the folder holds no result, so
+    it is not refused, and preparing it removes the leftover. A real file is still refused."""
+    from jaxdeploy.io import TEMP_PREFIX, check_output_dir, prepare_output_dir
+
+    out = tmp_path / "run"
+    out.mkdir()
+    leftover = out / f"{TEMP_PREFIX}abc-summary.json"
+    leftover.write_text('{"half": ')
+    check_output_dir(str(out), overwrite=False)
+    prepare_output_dir(str(out), overwrite=False)
+    assert not leftover.exists()
+    (out / "summary.json").write_text("{}")
+    with pytest.raises(FileExistsError, match="already holds results"):
+        check_output_dir(str(out), overwrite=False)
