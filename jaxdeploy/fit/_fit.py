@@ -144,14 +144,7 @@ class Model:
                 adjoint=dfx.ForwardMode(),
                 **simulate_options,
             )
-            channels = scene.channels(scene.build(params), traj)
-            missing = [n for n in names if n not in channels]
-            if missing:
-                raise ValueError(
-                    f"channel {missing[0]!r} is not an output of scene {scene.name!r}; valid: "
-                    + ", ".join(sorted(channels))
-                )
-            model = {n: channels[n] for n in names}
+            model = scene.select_channels(scene.build(params), traj, names)
             r = comparison.residuals(model)
             return r, (r, model, traj.result == dfx.RESULTS.successful)
 

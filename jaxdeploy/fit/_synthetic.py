@@ -18,14 +18,8 @@ def model_channels(scene, params: Mapping, ts, names: Sequence[str], **run_optio
     traj = run_scene(scene, params, float(ts[-1]), ts=ts, **run_options)
     if not traj.ok:
         raise RuntimeError(f"simulation of {scene.name} {traj.status()}")
-    channels = scene.channels(scene.build(params), traj)
-    missing = [n for n in names if n not in channels]
-    if missing:
-        raise ValueError(
-            f"channel {missing[0]!r} is not an output of scene {scene.name!r}; valid: "
-            + ", ".join(sorted(channels))
-        )
-    return {n: np.asarray(channels[n]) for n in names}
+    channels = scene.select_channels(scene.build(params), traj, names)
+    return {n: np.asarray(v) for n, v in channels.items()}
 
 
 def synthesize(

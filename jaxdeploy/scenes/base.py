@@ -99,6 +99,18 @@ class Scene(abc.ABC):
                 out[f"{body.name}_a{coordinate}"] = trajectory.qdd[:, 3 * k + j]
         return out
 
+    def select_channels(self, mechanism: Mechanism, trajectory, names) -> dict:
+        """`{name: channel}` for the requested `names`; an unknown name raises `ValueError`
+        listing the scene's channels."""
+        channels = self.channels(mechanism, trajectory)
+        missing = [n for n in names if n not in channels]
+        if missing:
+            raise ValueError(
+                f"channel {missing[0]!r} is not an output of scene {self.name!r}; valid: "
+                + ", ".join(sorted(channels))
+            )
+        return {n: channels[n] for n in names}
+
     def summary(self, params, mechanism, trajectory) -> dict:
         return {}
 
