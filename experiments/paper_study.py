@@ -306,6 +306,14 @@ def trend_verdict(trend, expected):
     return "disagrees"
 
 
+def comparison_verdict(comparison, expected):
+    """'agrees' if the resolved comparison is the expected one, 'not resolved' if within the
+    error bars ('≈') or undefined ('?'), else 'disagrees'."""
+    if comparison == expected:
+        return "agrees"
+    return "not resolved" if comparison in ("≈", "?") else "disagrees"
+
+
 def spread_verdict(ev, metric, cases, limit):
     """'Similar across cases': max/min ratio of the values below `limit`."""
     vals = np.array([ev.value(metric, i) for i in cases])
@@ -412,7 +420,7 @@ def claims(ev: Evidence):
         verdict_from(["agrees" if 1.5 <= r <= 2.5 else "disagrees" for r in ratios]),
     )
     checks = [
-        "agrees" if c == "<" else ("not resolved" if c == "≈" else "disagrees")
+        comparison_verdict(c, "<")
         for c in (ev.compare("panel2_centre_y_deploy", i, "panel1_centre_y_deploy", i) for i in R)
     ]
     add(
@@ -429,7 +437,7 @@ def claims(ev: Evidence):
             ev.compare("panel2_tip_x_settling", i, "panel1_tip_x_settling", i),
             ev.compare("panel2_tip_x_late_rms", i, "panel1_tip_x_late_rms", i),
         ):
-            checks.append("agrees" if c == "<" else ("not resolved" if c in "≈?" else "disagrees"))
+            checks.append(comparison_verdict(c, "<"))
     add(
         "R9",
         "10b, 12b",
@@ -442,7 +450,7 @@ def claims(ev: Evidence):
         verdict_from(checks),
     )
     checks = [
-        "agrees" if c == ">" else ("not resolved" if c == "≈" else "disagrees")
+        comparison_verdict(c, ">")
         for c in (ev.compare("panel2_tip_y_late_rms", i, "panel1_tip_y_late_rms", i) for i in R)
     ]
     add(
@@ -466,10 +474,7 @@ def claims(ev: Evidence):
     c1 = ev.compare("panel1_freq_locked", R[1], "panel1_freq_locked", R[0])
     c2 = ev.compare("panel1_freq_locked", R[1], "panel1_freq_locked", R[2])
     c3 = ev.compare("panel1_freq_locked", R[0], "panel1_freq_locked", R[2])
-    checks = [
-        "agrees" if c == want else ("not resolved" if c in "≈?" else "disagrees")
-        for c, want in ((c1, ">"), (c2, ">"), (c3, "<"))
-    ]
+    checks = [comparison_verdict(c, want) for c, want in ((c1, ">"), (c2, ">"), (c3, "<"))]
     add(
         "R12",
         "14",
@@ -487,10 +492,7 @@ def claims(ev: Evidence):
     )
     lowest = [ev.compare("panel2_amp_locked", R[2], "panel2_amp_locked", i) for i in R[:2]]
     fastest = [ev.compare("panel2_acc_settling", R[2], "panel2_acc_settling", i) for i in R[:2]]
-    checks = [
-        "agrees" if c == "<" else ("not resolved" if c in "≈?" else "disagrees")
-        for c in lowest + fastest
-    ]
+    checks = [comparison_verdict(c, "<") for c in lowest + fastest]
     add(
         "R14",
         "15",
@@ -570,7 +572,7 @@ def claims(ev: Evidence):
             (ev.compare("panel2_amp_locked", i, "panel1_amp_locked", i), ">"),
             (ev.compare("panel2_freq_locked", i, "panel1_freq_locked", i), "<"),
         ):
-            checks.append("agrees" if c == want else ("not resolved" if c in "≈?" else "disagrees"))
+            checks.append(comparison_verdict(c, want))
     add(
         "C7",
         "21 vs 22",
