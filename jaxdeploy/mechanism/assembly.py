@@ -138,12 +138,10 @@ def _worst_element(mechanism: Mechanism, q, t) -> str:
     return where
 
 
-def _singular_value_range(mechanism: Mechanism, q, t, fixed):
-    """Largest and smallest singular values of Φ_q (augmented by the fixed coordinates, which
-    is what the assembly solved). Diagnostics only: no derivatives flow through them."""
+def _singular_value_range(mechanism: Mechanism, q, t):
+    """Largest and smallest singular values of Φ_q. Diagnostics only: no derivatives flow
+    through them."""
     jac = jax.lax.stop_gradient(mechanism.constraint_jacobian(q, t))
-    if fixed:
-        jac = jnp.concatenate([jac, jnp.eye(q.shape[0])[jnp.asarray(tuple(fixed), dtype=int)]])
     if jac.shape[0] == 0:
         return jnp.ones(()), jnp.ones(())
     sv = jnp.linalg.svd(jac, compute_uv=False)
@@ -165,7 +163,7 @@ def _consistent_core(mechanism, q_guess, v_guess, t, fixed, fixed_velocities, to
     """Everything of `consistent_state` as one compiled program (op-by-op dispatch of the
     Gauss–Newton loop and the Jacobians would cost seconds of small compilations)."""
     q, res, it = assemble_positions(mechanism, q_guess, t, fixed, tol)
-    sv_max, sv_min = _singular_value_range(mechanism, q, t, ())
+    sv_max, sv_min = _singular_value_range(mechanism, q, t)
     v = project_velocities(mechanism, q, v_guess, t, fixed_velocities)
     memory = mechanism.init_memory(q, v)
     qdd, lam = mechanism.accelerations(q, v, t, memory)
