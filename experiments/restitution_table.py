@@ -264,9 +264,8 @@ def main():
         "bearing (K = 1e10 N/m^1.5, Hertz contact duration t_c = 3.22e-4 s). The effective "
         "restitution is e_eff = −v_x(after)/v0, read at the first saved point after the "
         "penetration changes sign again (no force acts there). Steps are adaptive (rtol 1e-8, "
-        "atol 1e-14 m) with dt_max = t_c/1000, so the step in which contact begins is short "
-        "(v⁻ is the approach speed at the start of that step; in free flight it equals v0 "
-        "exactly).",
+        "atol 1e-14 m) with dt_max = t_c/1000; v⁻, the largest approach speed of the contact, "
+        "is located on each step's interpolant of δ (docs/mechanism.md) and equals v0 here.",
         "",
         "**These laws differ from each other by design**: they are different χ(c_e) "
         "calibrations of the same force form, and the table is a measurement, not a claim "

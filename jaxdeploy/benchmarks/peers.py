@@ -1,8 +1,8 @@
 """Peers for the work–precision benchmark: scipy `solve_ivp` on the slider-crank.
 
 Two right-hand sides of the *same* model (absolute coordinates, index-1 with Baumgarte
-stabilisation, Hertz contact with Lankarani–Nikravesh damping, v⁻ = approach speed at contact
-onset):
+stabilisation, Hertz contact with Lankarani–Nikravesh damping, v⁻ = the largest approach speed
+of the current contact, `jaxdeploy.mechanism.clearance`):
 
 * `SliderCrankNumpy`: written the way a scipy user would (Flores & Ambrósio 2004; Nikravesh
   1988): hand-derived constraint Jacobian and `γ`, numpy arrays, `numpy.linalg.solve`. It
@@ -10,10 +10,11 @@ onset):
 * `jitted_rhs(mechanism)`: jaxdeploy's own index-1 field, jitted, called from scipy — the same
   integrator on a cheaper or dearer function call tells integrator quality from call cost.
 
-Contact onset is an event (δ = 0 crossing upward): the integration stops there, records
-v⁻ = δ̇ and restarts, as a scipy user would do with a memory variable. This is the exact
-limit of jaxdeploy's step-wise memory (v⁻ taken at the start of the step in which contact
-begins), which converges to it at O(h).
+v⁻ is kept exactly by events, as a scipy user would keep a memory variable: contact onset
+(δ = 0 crossing upward) stops the integration and sets v⁻ = δ̇ there; while the approach
+speeds up beyond v⁻ the force uses `max(v⁻, δ̇)` (the running maximum), and its peak (δ̈ = 0
+crossing downward) stops the integration and sets v⁻ = δ̇ there. jaxdeploy's step-wise memory
+(onset interpolated inside the step, maximum sampled at step ends) converges to this at O(h²).
 """
 
 from __future__ import annotations
@@ -98,6 +99,20 @@ class SliderCrankNumpy:
     def penetration_rate(self, y):
         return self.contact_kinematics(y[:9], y[9:])[1]
 
+    def penetration_acceleration(self, t, y, v_minus):
+        """`δ̈ = ë·n + (|ė|² − (ė·n)²)/|e|`, `e` = journal centre − bearing centre (δ̇ = ė·n:
+        the contact points' rotation terms are normal to n)."""
+        q, v = y[:9], y[9:]
+        qdd = self.accelerations(t, q, v, v_minus)
+        a2 = _rot(q[5])
+        arm = a2 @ self.s_small
+        e = q[3:5] + arm - q[6:8]
+        e_dot = v[3:5] + v[5] * _perp(arm) - v[6:8]
+        e_ddot = qdd[3:5] + qdd[5] * _perp(arm) - v[5] ** 2 * arm - qdd[6:8]
+        norm_e = math.sqrt(e @ e + 1e-24)
+        n = e / norm_e
+        return e_ddot @ n + (e_dot @ e_dot - (e_dot @ n) ** 2) / norm_e
+
     # --- equations of motion ----------------------------------------------------------------
 
     def forces(self, q, v, v_minus):
@@ -105,7 +120,8 @@ class SliderCrankNumpy:
         f[[1, 4, 7]] = -self.mass[[0, 3, 6]] * self.g
         delta, rate, n, qj, qi = self.contact_kinematics(q, v)
         if delta > 0.0:
-            v_eff = math.sqrt(v_minus**2 + VELOCITY_FLOOR**2)
+            v_running = max(v_minus, rate)  # running maximum of the approach speed
+            v_eff = math.sqrt(v_running**2 + VELOCITY_FLOOR**2)
             fn = max(0.0, self.K * delta**1.5 * (1.0 + self.chi * rate / v_eff))
             fj = -fn * n
             f[3:5] += fj
@@ -165,7 +181,8 @@ class SliderCrankNumpy:
 
 def jitted_rhs(mechanism, baumgarte: float = BAUMGARTE):
     """jaxdeploy's index-1 field of `mechanism` (one clearance joint with v⁻ memory), jitted,
-    as numpy-in/numpy-out `(rhs(t, y, v_minus), penetration(t, y), penetration_rate(y))`."""
+    as numpy-in/numpy-out `(rhs(t, y, v_minus), penetration(t, y), penetration_rate(y),
+    penetration_acceleration(t, y, v_minus))`."""
     import jax
     import jax.numpy as jnp
 
@@ -192,6 +209,11 @@ def jitted_rhs(mechanism, baumgarte: float = BAUMGARTE):
         g = joint.geometry(mechanism.kinematics(y[:n], y[n:]))
         return jnp.stack([g.penetration, g.penetration_rate])
 
+    @jax.jit
+    def rate_derivative(t, y, v_minus):
+        # d/dt δ̇ along the field: a JVP of the rate in the direction (q̇, q̈).
+        return jax.jvp(lambda z: geometry(z)[1], (y,), (f(t, y, v_minus),))[1]
+
     def rhs(t, y, v_minus):
         return np.asarray(f(t, y, v_minus))
 
@@ -201,7 +223,10 @@ def jitted_rhs(mechanism, baumgarte: float = BAUMGARTE):
     def penetration_rate(y):
         return float(geometry(y)[1])
 
-    return rhs, penetration, penetration_rate
+    def penetration_acceleration(t, y, v_minus):
+        return float(rate_derivative(t, y, v_minus))
+
+    return rhs, penetration, penetration_rate, penetration_acceleration
 
 
 @dataclass
@@ -214,32 +239,58 @@ class PeerRun:
     wall: float
     ok: bool
     message: str
+    events: list  # (t, "onset" | "peak", v⁻ after the event)
 
 
 def solve_with_onset_events(
-    rhs, penetration, penetration_rate, y0, t_span, ts, method, rtol, atol, max_restarts=10_000
+    rhs,
+    penetration,
+    penetration_rate,
+    penetration_acceleration,
+    y0,
+    t_span,
+    ts,
+    method,
+    rtol,
+    atol,
+    max_restarts=10_000,
 ) -> PeerRun:
-    """`scipy.integrate.solve_ivp` from event to event: each contact onset (δ = 0, rising)
-    stops the integration, sets v⁻ = δ̇ there, and restarts. Returns the states at `ts`
-    (from each segment's dense output)."""
+    """`scipy.integrate.solve_ivp` from event to event, keeping v⁻ (the running maximum of the
+    approach speed over the current contact) exactly:
+
+    * onset, δ = 0 rising: v⁻ = δ̇ there;
+    * peak of the approach, δ̈ = 0 falling while in contact with δ̇ above v⁻ (between the two
+      the right-hand side's `max(v⁻, δ̇)` *is* the running maximum): v⁻ = δ̇ there.
+
+    Each event stops the integration, updates v⁻ and restarts. Returns the states at `ts`
+    (from each segment's dense output); `n_events` counts both kinds."""
     from scipy.integrate import solve_ivp
 
     # A segment that starts at an onset starts with δ = 0 (to the root finder's accuracy): the
-    # event is offset by 1e-13 m there, so that it cannot fire again at once.
+    # event is offset by 1e-13 m there, so that it cannot fire again at once. A peak event is
+    # armed only while δ̇ exceeds v⁻ by more than 1e-12 m/s, which a segment starting at a
+    # peak (δ̇ = v⁻) does not.
     offset = [0.0]
 
     def onset(t, y, v_minus):
         return penetration(t, y) + offset[0]
 
-    onset.terminal = True
-    onset.direction = 1.0
+    def peak(t, y, v_minus):
+        if penetration(t, y) > 0.0 and penetration_rate(y) > v_minus + 1e-12:
+            return penetration_acceleration(t, y, v_minus)
+        return 1.0  # disarmed: arming happens while δ̈ > 0, so no sign change is invented
+
+    for event, direction in ((onset, 1.0), (peak, -1.0)):
+        event.terminal = True
+        event.direction = direction
 
     ts = np.asarray(ts, dtype=float)
     out = np.full((ts.size, y0.size), np.nan)
     t0, t1 = t_span
     y = np.asarray(y0, dtype=float)
-    v_minus = 0.0
-    steps = nfev = njev = events = 0
+    v_minus = max(penetration_rate(y), 0.0)
+    steps = nfev = njev = 0
+    events = []
     ok, message = True, "ok"
     start = time.perf_counter()
     for _ in range(max_restarts):
@@ -250,7 +301,7 @@ def solve_with_onset_events(
             method=method,
             rtol=rtol,
             atol=atol,
-            events=onset,
+            events=(onset, peak),
             args=(v_minus,),
             dense_output=True,
         )
@@ -266,14 +317,17 @@ def solve_with_onset_events(
             break
         if sol.status == 0:
             break
-        events += 1
-        y = sol.y_events[0][0]
-        v_minus = max(penetration_rate(y), 0.0)
-        t0 = sol.t_events[0][0]
-        offset[0] = 1e-13
+        fired = 0 if sol.t_events[0].size else 1
+        t0, y = sol.t_events[fired][0], sol.y_events[fired][0]
+        if fired == 0:
+            v_minus = max(penetration_rate(y), 0.0)
+            offset[0] = 1e-13
+        else:
+            v_minus = max(penetration_rate(y), v_minus)
+        events.append((float(t0), ("onset", "peak")[fired], v_minus))
         if t0 >= t1:
             break
     else:
         ok, message = False, f"more than {max_restarts} restarts"
     wall = time.perf_counter() - start
-    return PeerRun(out, steps, nfev, njev, events, wall, ok, message)
+    return PeerRun(out, steps, nfev, njev, len(events), wall, ok, message, events)

@@ -175,10 +175,7 @@ def _run_jaxdeploy(cfg: Config, mech, s0, ts, t_end):
 def _run_scipy(cfg: Config, model, y0, ts, t_end):
     from .peers import solve_with_onset_events
 
-    rhs, penetration, rate = model
-    run = solve_with_onset_events(
-        rhs, penetration, rate, y0, (0.0, t_end), ts, cfg.solver, cfg.rtol, cfg.atol
-    )
+    run = solve_with_onset_events(*model, y0, (0.0, t_end), ts, cfg.solver, cfg.rtol, cfg.atol)
     n = y0.size // 2
     # solve_ivp does not report rejected steps or Newton iterations.
     return run.ys[:, :n], run.n_steps, -1, -1, "ok" if run.ok else run.message
@@ -229,7 +226,12 @@ def run_benchmark(
 
                 if cfg.kind == "scipy-numpy":
                     m = SliderCrankNumpy(params)
-                    models[cfg.kind] = (m.rhs, m.penetration, m.penetration_rate)
+                    models[cfg.kind] = (
+                        m.rhs,
+                        m.penetration,
+                        m.penetration_rate,
+                        m.penetration_acceleration,
+                    )
                 else:
                     models[cfg.kind] = jitted_rhs(mech)
             y0 = np.concatenate([np.asarray(s0.q), np.asarray(s0.v)])

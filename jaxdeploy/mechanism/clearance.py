@@ -13,16 +13,27 @@ With P_i the bearing centre (on `bearing_body`) and P_j the journal centre (on `
 law; with `friction=None` no friction code is traced. ε (default 1e-12 m) keeps the centred
 joint (e = 0) differentiable.
 
-Memory (only for laws that need the impact velocity v⁻): `in_contact` and `impact_velocity`.
-During a step that starts out of contact, v⁻ is the approach speed δ̇ at the step's start
-(the speed just before impact); once in contact it is held until the surfaces separate, as in
-Flores & Ambrósio (2010), except that it rises to any larger approach speed met during the
-contact: v⁻ is the largest approach speed of the current contact. In an ordinary impact the
-approach decelerates from v⁻ and nothing changes; but a contact that starts at rest (a centred
-journal whose rough law is already past its onset, σ ≳ c/3, has δ̇ = 0 at t = 0) and is then
-driven in would otherwise keep v⁻ = 0, i.e. the floor `VELOCITY_FLOOR`, and a damping term
-χ δ̇/v⁻ thousands of times too large (it captured a 10 m/s impact). "In contact" means δ
-beyond the elastic law's onset (0 for Hertz, about (s0 − 3)σ for the rough law).
+Memory (only for laws that need the impact velocity v⁻): `in_contact`, `impact_velocity` and
+`penetration`, updated after each accepted step. v⁻ is the **largest approach speed of the
+current contact**, a continuous-time definition that no step sequence changes:
+
+    v⁻(t) = max_{s ∈ [t_on, t]} δ̇(s),      t_on = the onset (δ crosses the law's onset upward)
+
+and the damping law sees `max(v⁻, δ̇)`, the running maximum including the present state. In an
+ordinary impact the approach decelerates from onset, so v⁻ = δ̇(t_on), the onset speed of
+Lankarani & Nikravesh (1990) and Flores & Ambrósio (2010). When the approach keeps speeding up
+after onset (a contact driven in by the mechanism, or one that starts at rest: a centred
+journal already past a rough law's onset, σ ≳ c/3, has δ̇ = 0 at t = 0), v⁻ follows it, so the
+damping ratio χ δ̇/v⁻ stays ≤ χ while approaching and the rebound is calibrated to the speed
+actually reached (a v⁻ held at its onset value 0 gave a damping term thousands of times too
+large and captured a 10 m/s impact).
+
+Discretely, after each accepted step δ(t) is the cubic Hermite interpolant of the step's end
+values (δ, δ̇): the onset is located on it (where taking δ̇ at the step's start would be an
+O(h) error) and the running maximum includes the interpolant's maximum inside the step (an
+interior peak missed between step ends would be O(h²)). Both are then O(h⁴)-accurate
+quantities of the continuous model, below any solver's own error. "In contact" means δ beyond the
+elastic law's onset (0 for Hertz, about (s0 − 3)σ for the rough law).
 """
 
 from __future__ import annotations
@@ -66,6 +77,47 @@ class ClearanceGeometry:
         self.penetration_rate = jnp.dot(v, n)
         self.sliding_velocity = jnp.dot(v, t)
         self.contact_point_bearing, self.contact_point_journal = qi, qj
+
+
+class _StepPenetration:
+    """δ over one step as the cubic Hermite interpolant of its end values `(δ₀, δ̇₀)`,
+    `(δ₁, δ̇₁)`, s = (t − t₀)/h ∈ [0, 1] (δ̇ = d|e|/dt exactly, since the contact points'
+    rotation terms are normal to n). Its rate is the quadratic
+
+        δ̇(s) = a + (6D − 4a − 2b) s + (3a + 3b − 6D) s²,   a = δ̇₀, b = δ̇₁, D = (δ₁ − δ₀)/h.
+    """
+
+    def __init__(self, delta0, rate0, delta1, rate1, step):
+        self.delta0, self.delta1 = delta0, delta1
+        self.rate0 = rate0
+        mean = (delta1 - delta0) / step
+        self.step = step
+        self.c1 = 6.0 * mean - 4.0 * rate0 - 2.0 * rate1
+        self.c2 = 3.0 * rate0 + 3.0 * rate1 - 6.0 * mean
+
+    def rate(self, s):
+        return self.rate0 + self.c1 * s + self.c2 * s**2
+
+    def penetration(self, s):
+        return self.delta0 + self.step * (self.rate0 * s + self.c1 * s**2 / 2 + self.c2 * s**3 / 3)
+
+    def crossing(self, level):
+        """The s ∈ [0, 1] where δ(s) = `level` (δ₀ ≤ level < δ₁): the linear estimate refined
+        by Newton on the cubic."""
+        rise = self.delta1 - self.delta0
+        s = jnp.clip((level - self.delta0) / jnp.where(rise > 0, rise, 1.0), 0.0, 1.0)
+        for _ in range(3):
+            slope = self.step * self.rate(s)
+            s = s - (self.penetration(s) - level) / jnp.where(slope > 0, slope, jnp.inf)
+            s = jnp.clip(s, 0.0, 1.0)
+        return s
+
+    def max_rate(self, s_start):
+        """max of δ̇(s) over s ∈ [s_start, 1]: the ends, or the parabola's vertex inside."""
+        vertex = -self.c1 / jnp.where(self.c2 < 0, 2.0 * self.c2, -1.0)
+        inside = (self.c2 < 0) & (vertex > s_start) & (vertex < 1.0)
+        ends = jnp.maximum(self.rate(s_start), self.rate(1.0))
+        return jnp.where(inside, jnp.maximum(ends, self.rate(jnp.clip(vertex, 0.0, 1.0))), ends)
 
 
 class RevoluteClearance(AbstractElement):
@@ -119,34 +171,45 @@ class RevoluteClearance(AbstractElement):
         return {
             "in_contact": jnp.where(g.penetration > self._onset(), 1.0, 0.0),
             "impact_velocity": jnp.maximum(g.penetration_rate, 0.0),
+            "penetration": g.penetration,
+            "penetration_rate": g.penetration_rate,
         }
 
-    def memory_for_step(self, memory, kin: Kinematics):
+    def memory_after_step(self, memory, kin: Kinematics, step):
+        """Update v⁻ after an accepted step of length `step` that ended at `kin` (module
+        docstring). `penetration` and `penetration_rate` record δ and δ̇ at the step's end, the
+        start values of the next step."""
         if not self.has_memory:
             return memory
         g = self.geometry(kin)
-        approach = jnp.maximum(g.penetration_rate, 0.0)
-        held = memory["in_contact"] > 0.5
+        onset = self._onset()
+        path = _StepPenetration(
+            memory["penetration"],
+            memory["penetration_rate"],
+            g.penetration,
+            g.penetration_rate,
+            step,
+        )
+        was_in = memory["in_contact"] > 0.5
+        now_in = g.penetration > onset
+        # A contact that began inside this step counts from its onset, located on the step.
+        s_on = jnp.where(was_in, 0.0, path.crossing(onset))
+        held = jnp.where(was_in, memory["impact_velocity"], 0.0)
+        running_max = jnp.maximum(held, path.max_rate(s_on))
         return {
-            "in_contact": memory["in_contact"],
-            "impact_velocity": jnp.where(
-                held, jnp.maximum(memory["impact_velocity"], approach), approach
-            ),
-        }
-
-    def memory_after_step(self, memory, kin: Kinematics):
-        if not self.has_memory:
-            return memory
-        g = self.geometry(kin)
-        return {
-            "in_contact": jnp.where(g.penetration > self._onset(), 1.0, 0.0),
-            "impact_velocity": memory["impact_velocity"],
+            "in_contact": jnp.where(now_in, 1.0, 0.0),
+            "impact_velocity": jnp.maximum(jnp.where(now_in, running_max, g.penetration_rate), 0.0),
+            "penetration": g.penetration,
+            "penetration_rate": g.penetration_rate,
         }
 
     def contact_forces(self, kin: Kinematics, memory):
         """`(F_N, F_T, geometry)` at state `kin`."""
         g = self.geometry(kin)
-        v_minus = None if memory is None else memory["impact_velocity"]
+        # The running maximum of the approach speed includes the present state (docstring).
+        v_minus = (
+            None if memory is None else jnp.maximum(memory["impact_velocity"], g.penetration_rate)
+        )
         fn = self.normal.force(g.penetration, g.penetration_rate, v_minus)
         ft = 0.0 if self.friction is None else self.friction.force(g.sliding_velocity, fn)
         return fn, ft, g

@@ -34,13 +34,16 @@ class AbstractElement(eqx.Module):
     - `wrenches(kin, t, memory)` for forces;
     - `has_memory`, `init_memory`, `memory_for_step`, `memory_after_step` for state that
       changes between steps only (it is held fixed while Newton solves a step, which keeps the
-      step's residual smooth);
+      step's residual smooth), and `switch_flags`: the memory keys whose flip switches the
+      model discontinuously at a step boundary (an O(h) effect that adaptive solvers localise,
+      see `switched`);
     - `potential_energy(kin, memory)` for the conservative part of their forces (energy
       balances, `mechanism/energy.py`).
     """
 
     n_constraints: ClassVar[int] = 0
     has_memory: ClassVar[bool] = False
+    switch_flags: ClassVar[tuple[str, ...]] = ()
 
     def constraint(self, kin: Kinematics, t) -> Array:
         return jnp.zeros((0,), dtype=kin.q.dtype)
@@ -64,9 +67,14 @@ class AbstractElement(eqx.Module):
         """Memory used throughout the step that starts at state `kin`."""
         return memory
 
-    def memory_after_step(self, memory, kin: Kinematics):
-        """Memory after an accepted step that ended at state `kin`."""
+    def memory_after_step(self, memory, kin: Kinematics, step):
+        """Memory after an accepted step of length `step` (s) that ended at state `kin`."""
         return memory
+
+    def switched(self, before, after) -> Array:
+        """Whether a step flipped one of the `switch_flags` of this element's memory."""
+        flips = [jnp.any(before[key] != after[key]) for key in self.switch_flags]
+        return jnp.any(jnp.stack(flips)) if flips else jnp.array(False)
 
     def idealized(self) -> AbstractElement:
         """This element with clearances removed (the ideal-joint reference)."""

@@ -208,6 +208,8 @@ class Latch(AbstractElement):
     angle_offset: float = param(default=0.0)
     direction: int = static(default=1)
     has_memory: ClassVar[bool] = True
+    # Engagement happens at a step boundary, at an overshoot bounded by that step's rotation.
+    switch_flags: ClassVar[tuple[str, ...]] = ("engaged",)
 
     def __check_init__(self):
         check_positive("Latch.stiffness", self.stiffness, "N m/rad")
@@ -223,7 +225,7 @@ class Latch(AbstractElement):
     def init_memory(self, kin: Kinematics):
         return {"engaged": jnp.where(self._reached(kin), 1.0, 0.0)}
 
-    def memory_after_step(self, memory, kin: Kinematics):
+    def memory_after_step(self, memory, kin: Kinematics, step):
         engaged = jnp.maximum(memory["engaged"], jnp.where(self._reached(kin), 1.0, 0.0))
         return {"engaged": engaged}
 

@@ -73,6 +73,11 @@ class EnergyMeter(AbstractElement):
     def potential_energy(self, kin: Kinematics, memory):
         return self.inner.potential_energy(kin, memory["inner"])
 
+    def switched(self, before, after):
+        if not self.inner.has_memory:
+            return jnp.array(False)
+        return self.inner.switched(before["inner"], after["inner"])
+
     def idealized(self):
         # A clearance joint idealizes to a revolute joint, which does no work: no meter.
         ideal = self.inner.idealized()
@@ -80,8 +85,8 @@ class EnergyMeter(AbstractElement):
 
     # --- metering -------------------------------------------------------------------------
 
-    def _inner_memory(self, method, memory, kin):
-        return getattr(self.inner, method)(memory, kin) if self.inner.has_memory else memory
+    def _inner_memory(self, method, memory, kin, *step):
+        return getattr(self.inner, method)(memory, kin, *step) if self.inner.has_memory else memory
 
     def _nonconservative_force(self, kin: Kinematics, inner_memory):
         """`Q_e + ∇_q V_e` at `kin`, with the inner element's memory."""
@@ -114,11 +119,11 @@ class EnergyMeter(AbstractElement):
             "injected": memory["injected"] + self._jump(kin, memory["inner"], inner),
         }
 
-    def memory_after_step(self, memory, kin: Kinematics):
+    def memory_after_step(self, memory, kin: Kinematics, step):
         step_memory = memory["inner"]
         force_end = self._nonconservative_force(kin, step_memory)
         work = 0.5 * jnp.dot(memory["force_start"] + force_end, kin.q - memory["q_start"])
-        inner = self._inner_memory("memory_after_step", step_memory, kin)
+        inner = self._inner_memory("memory_after_step", step_memory, kin, step)
         return {
             "inner": inner,
             "q_start": memory["q_start"],
@@ -155,7 +160,7 @@ class StepClock(AbstractElement):
     def memory_for_step(self, memory, kin: Kinematics):
         return {**memory, "t_start": self._time(kin)}
 
-    def memory_after_step(self, memory, kin: Kinematics):
+    def memory_after_step(self, memory, kin: Kinematics, step):
         h = self._time(kin) - memory["t_start"]
         return {
             "t_start": memory["t_start"],

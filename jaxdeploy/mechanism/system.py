@@ -175,12 +175,22 @@ class Mechanism(eqx.Module):
             for e, m in zip(self.elements, memory, strict=True)
         )
 
-    def memory_after_step(self, memory, q, v):
+    def memory_after_step(self, memory, q, v, step):
+        """Memory after an accepted step of length `step` (s) that ended at `(q, v)`."""
         kin = self.kinematics(q, v)
         return tuple(
-            e.memory_after_step(m, kin) if e.has_memory else None
+            e.memory_after_step(m, kin, step) if e.has_memory else None
             for e, m in zip(self.elements, memory, strict=True)
         )
+
+    def switched(self, memory_before, memory_after):
+        """Whether a step flipped any element's switch flag (`AbstractElement.switch_flags`)."""
+        flips = [
+            e.switched(a, b)
+            for e, a, b in zip(self.elements, memory_before, memory_after, strict=True)
+            if e.has_memory
+        ]
+        return jnp.any(jnp.stack(flips)) if flips else jnp.array(False)
 
     # --- index-1 form and energy -----------------------------------------------------------------
 

@@ -182,7 +182,7 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
         qdd1 = beta_p * u
         lam1 = beta_p * mu
         a1 = a_pred + (1.0 - cf.alpha_f) / (1.0 - cf.alpha_m) * qdd1
-        memory1 = mech.memory_after_step(memory, q1, v1)
+        memory1 = mech.memory_after_step(memory, q1, v1, h)
         y1 = MechanismState(q1, v1, qdd1, lam1, memory1)
 
         # Error estimate under stop_gradient: step-size control must not be differentiated.

@@ -18,12 +18,13 @@ velocity v⁻, latch flag) are updated exactly as in the generalized-α solver: 
 step (`Mechanism.memory_for_step`), updated after an accepted one
 (`Mechanism.memory_after_step`).
 
-Switch localisation: a memory flag that flips inside a step (contact onset, latch engagement)
-makes the step's model depend on where the step boundary fell (v⁻ is the approach speed at the
-step's start): an O(h) effect no higher-order error estimate sees. With
-`resolve_switches=True` such a step reports the velocity change over the step, `|q̇₁ − q̇₀|`,
-as its velocity error, so the step-size controller shrinks steps at switches until that
-first-order effect is within tolerance too.
+Switch localisation: a memory flag that switches the model at a step boundary (a latch that
+engages at the end of the step in which its angle is reached; `AbstractElement.switch_flags`)
+makes the solution depend on where the boundary fell: an O(h) effect no higher-order error
+estimate sees. With `resolve_switches=True` a step that flips such a flag reports the velocity
+change over the step, `|q̇₁ − q̇₀|`, as its velocity error, so the step-size controller shrinks
+steps at switches until that first-order effect is within tolerance too. (Clearance contact
+onsets need no such help: their v⁻ is interpolated to the onset inside the step, O(h²).)
 """
 
 from __future__ import annotations
@@ -103,13 +104,6 @@ class MechanismODEState(NamedTuple):
     inner: object
 
 
-def _leaves_differ(a, b):
-    la, lb = jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)
-    if not la:
-        return jnp.array(False)
-    return jnp.any(jnp.stack([jnp.any(x != y) for x, y in zip(la, lb, strict=True)]))
-
-
 class MechanismODESolver(dfx.AbstractAdaptiveSolver):
     """Integrates a `MechanismTerm` as an index-1 ODE with a diffrax solver (e.g.
     `diffrax.Kvaerno5`), projecting onto the constraints and updating memory after each step.
@@ -120,10 +114,8 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
       `ode_solver`.
     - `baumgarte`: ω_b [rad/s] ≥ 0 of the stabilisation (default 0: projection only).
     - `project`: project onto the constraint manifold after each step (default True).
-    - `resolve_switches`: shrink steps at memory switches (default True; module docstring).
-      A switch is any memory leaf that `Mechanism.memory_after_step` changes; a memory that
-      changes after every step (e.g. `jaxdeploy.mechanism.metered`'s energy meters) would
-      count as a switch every step — use `resolve_switches=False` with such mechanisms.
+    - `resolve_switches`: shrink steps at memory switches (default True; module docstring):
+      steps that flip a switch flag (`Mechanism.switched`).
 
     Dense output is the cubic Hermite interpolant of `q` (with `q̇`) and `q̇` (with `q̈`),
     linear for `q̈`, `λ` and memory, as for `GeneralizedAlpha`.
@@ -166,7 +158,7 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
         if self.project:
             q1, v1 = project_onto_constraints(mech, q1, v1, t1)
         qdd1, lam1 = stabilised_accelerations(mech, q1, v1, t1, memory, self.baumgarte)
-        memory1 = mech.memory_after_step(memory, q1, v1)
+        memory1 = mech.memory_after_step(memory, q1, v1, h)
         y1 = MechanismState(q1, v1, qdd1, lam1, memory1)
 
         if err is None:
@@ -174,7 +166,7 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
         else:
             err_q, err_v = err
         if self.resolve_switches:
-            switched = _leaves_differ(memory, memory1)
+            switched = mech.switched(memory, memory1)
             err_v = jnp.where(switched, jnp.maximum(jnp.abs(err_v), jnp.abs(v1 - y0.v)), err_v)
         zeros = jax.tree_util.tree_map(jnp.zeros_like, (qdd1, lam1, memory1))
         y_error = jax.lax.stop_gradient(MechanismState(err_q, err_v, *zeros))
