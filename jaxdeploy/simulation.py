@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._validation import is_concrete
+from ._validation import check_nonnegative, check_positive, check_range, is_concrete
 from .mechanism import ConsistentState, Mechanism
 from .solvers import (
     GeneralizedAlpha,
@@ -101,6 +101,25 @@ class Trajectory(eqx.Module):
         return f"failed after t = {t_reached:.6g} s: {dfx.RESULTS[self.result]}"
 
 
+def _check_step_control(rtol, atol, dt_min, dt_max, max_steps):
+    """Refuse step-control settings no solver can honour, naming the value and the range."""
+    if rtol is not None:
+        check_range("rtol", rtol, 0.0, 1.0, low_inclusive=False, high_inclusive=False)
+    if atol is not None:
+        check_positive("atol", atol)
+    if dt_min is not None:
+        check_nonnegative("dt_min", dt_min, "s")
+    if dt_max is not None:
+        check_positive("dt_max", dt_max, "s")
+    if dt_min is not None and dt_max is not None and is_concrete((dt_min, dt_max)):
+        if float(dt_min) > float(dt_max):
+            raise ValueError(
+                f"dt_min = {dt_min!r} s is invalid: it must be ≤ dt_max = {dt_max!r} s"
+            )
+    if not (isinstance(max_steps, int) and max_steps > 0):
+        raise ValueError(f"max_steps = {max_steps!r} is invalid: it must be a positive integer")
+
+
 def _save_times(t0, t_end, n_save, ts):
     """Output times, checked here (in Python, when concrete) rather than by diffrax's runtime
     checks, which may be compiled out (see jaxdeploy/_compilation_cache.py)."""
@@ -182,6 +201,7 @@ def simulate(
     **Returns:** a `Trajectory`; check `.ok` / `.status()`: a failed solve keeps the states it
     finished and says when and why it stopped.
     """
+    _check_step_control(rtol, atol, dt_min, dt_max, max_steps)
     if isinstance(solver, str):
         solver = solver_by_name(solver, rtol=rtol, atol=atol)
     norm = state_norm if isinstance(solver, MechanismODESolver) else None

@@ -207,3 +207,33 @@ def test_unassemblable_pose_names_the_residual_and_the_joint():
         AssemblyError, match=r"constraint residual .*largest violation .* in element \d+ \(Revolute"
     ):
         consistent_state(mech, guess)
+
+
+@pytest.mark.parametrize(
+    "options, name",
+    [
+        ({"rtol": -1e-6}, "rtol"),
+        ({"rtol": 0.0}, "rtol"),
+        ({"rtol": 2.0}, "rtol"),
+        ({"rtol": 1e-6, "atol": 0.0}, "atol"),
+        ({"rtol": 1e-6, "atol": float("nan")}, "atol"),
+        ({"rtol": 1e-6, "dt_max": -1e-3}, "dt_max"),
+        ({"rtol": 1e-6, "dt_min": -1e-9}, "dt_min"),
+        ({"rtol": 1e-6, "dt_min": 1e-3, "dt_max": 1e-4}, "dt_min"),
+        ({"dt": 1e-4, "max_steps": 0}, "max_steps"),
+    ],
+)
+def test_simulate_refuses_bad_step_control_before_compiling(options, name, monkeypatch):
+    import jaxdeploy.simulation
+    from jaxdeploy.scenes import Pendulum
+    from jaxdeploy.simulation import simulate
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("the solver was compiled for input that should have been refused")
+
+    monkeypatch.setattr(jaxdeploy.simulation, "_solve", forbidden)
+    scene = Pendulum()
+    params = scene.resolve_params()
+    mech = scene.build(params)
+    with pytest.raises(ValueError, match=rf"^{name} = "):
+        simulate(mech, scene.initial_state(params, mech), 0.1, **options)
