@@ -103,6 +103,8 @@ def main():
     parser.add_argument("--block", type=float, default=0.002, help="block-mean length [s]")
     parser.add_argument("--dt", type=float, default=1e-5, help="fixed model step [s]")
     parser.add_argument("--regenerate", action="store_true", help="remake the data file")
+    parser.add_argument("--starts", type=int, default=32,
+                        help="Latin-hypercube starts before LM (fit 1)")  # fmt: skip
     args = parser.parse_args()
 
     scene = DeployArray(clearance_joints={"J1": "panel1"})
@@ -141,7 +143,8 @@ def main():
 
     specs1 = [(n, truth[n] * f, *BOUNDS[n]) for n, (_, f) in GUESSES.items()]
     fit1 = fit(scene, data, specs1, fixed=truth, residuals=stages, control=control,
-               max_iterations=args.max_iterations, callback=progress)  # fmt: skip
+               max_iterations=args.max_iterations, starts=args.starts, seed=SEED,
+               callback=progress)  # fmt: skip
     print(fit1.report(), flush=True)
     specs2 = [("youngs_modulus", truth["youngs_modulus"] * 1.5, *BOUNDS["youngs_modulus"]),
               ("poisson_ratio", 0.2, *BOUNDS["poisson_ratio"])]  # fmt: skip

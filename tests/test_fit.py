@@ -21,7 +21,7 @@ from jaxdeploy.fit import (
     make_parameters,
     synthesize,
 )
-from jaxdeploy.fit._fit import _curvature
+from jaxdeploy.fit._fit import _curvature, latin_hypercube_starts
 from jaxdeploy.fit._residuals import Comparison
 from jaxdeploy.scenes import Impact, Pendulum
 
@@ -188,3 +188,33 @@ def test_malformed_files_and_specs_are_refused(tmp_path, capsys):
     code = main(["fit", str(tmp_path / "m.txt"), "--scene", "impact", "--params", "stiffness",
                  "--out", str(tmp_path / "o2")])  # fmt: skip
     assert code == 2 and "unknown format" in capsys.readouterr().err
+
+
+def test_latin_hypercube_starts_fill_every_stratum_within_the_bounds():
+    params = [FitParameter("a", 1.0, 0.1, 10.0), FitParameter("b", 0.0, -5.0, 5.0)]
+    z = latin_hypercube_starts(params, 16, seed=1)
+    s = 1.0 / (1.0 + np.exp(-z))
+    for column in s.T:  # one point in each of the 16 strata of every coordinate
+        assert sorted(np.floor(column * 16).astype(int)) == list(range(16))
+    theta = np.array([[float(p.to_physical(zk)) for p, zk in zip(params, row, strict=True)]
+                      for row in z])  # fmt: skip
+    assert np.all((theta[:, 0] > 0.1) & (theta[:, 0] < 10)) and np.all(np.abs(theta[:, 1]) < 5)
+
+
+def test_multistart_escapes_the_local_minimum_a_far_guess_falls_into():
+    """A pendulum observed over several swings: from a length 4× too long, LM alone locks onto
+    a wrong phase (a local minimum); with a batch of Latin-hypercube starts first it finds the
+    true length within its reported error."""
+    scene = Pendulum()
+    truth = {"length": 0.8, "initial_angle": -0.6}
+    data = synthesize(scene, truth, np.linspace(0, 4.0, 201), ["rod_theta"], seed=7)
+    spec = ["length=3.2:0.1:5"]
+    alone = fit(scene, data, spec, fixed=truth, max_iterations=20)
+    assert abs(alone.estimates["length"] - 0.8) > 0.05  # the landscape is rugged here
+    result = fit(scene, data, spec, fixed=truth, max_iterations=20, starts=12, seed=0)
+    multistart = result.stages[0]
+    assert multistart["spec"]["kind"] == "multistart"
+    assert multistart["cost"] < multistart["guess_cost"]
+    se = result.standard_errors["length"]
+    assert abs(result.estimates["length"] - 0.8) < 3 * se and se < 0.01
+    assert 0.5 < result.reduced_chi2 < 1.5

@@ -69,6 +69,15 @@ def add_arguments(parser) -> None:
         help="continuation: fit up to T1, then T2, ... (each from the last)",
     )
     parser.add_argument("--max-iterations", type=int, default=30)
+    parser.add_argument(
+        "--starts",
+        type=int,
+        default=0,
+        metavar="N",
+        help="global first stage: simulate N Latin-hypercube points within the bounds (one "
+        "batch) and start from the best (default 0: start from the guess)",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of the --starts sample")
     parser.add_argument("--rtol", type=float, default=None, help="model step control")
     parser.add_argument("--atol", type=float, default=None)
     parser.add_argument("--dt-max", type=float, default=None)
@@ -190,6 +199,8 @@ def run(args) -> int:
         return _fail(str(err))
     if args.max_iterations < 1:
         return _fail(f"--max-iterations = {args.max_iterations} is invalid: it must be >= 1")
+    if args.starts < 0:
+        return _fail(f"--starts = {args.starts} is invalid: it must be >= 0")
     control = {}
     if args.dt is not None:
         if not args.dt > 0:
@@ -225,6 +236,8 @@ def run(args) -> int:
             residuals=stages,
             control=control,
             max_iterations=args.max_iterations,
+            starts=args.starts,
+            seed=args.seed,
             callback=None if args.quiet else _progress(names),
         )
     except (RuntimeError, ValueError) as err:
@@ -244,8 +257,12 @@ def run(args) -> int:
         noise_levels=result.comparison.sigma,
         step_control={**scene.default_control, **control},
         params={**fixed, **result.estimates},
-        seed=None,
-        randomness="none: Levenberg–Marquardt is deterministic from the initial guess",
+        seed=args.seed if args.starts else None,
+        randomness=(
+            f"--starts {args.starts}: Latin-hypercube start points drawn with --seed {args.seed}"
+            if args.starts
+            else "none: Levenberg–Marquardt is deterministic from the initial guess"
+        ),
         command=sys.argv,
         wall_time_s=wall,
         versions=run_metadata(),

@@ -13,6 +13,12 @@ Levenberg–Marquardt with Marquardt's diagonal scaling and Nielsen's damping up
 evaluation so that every iteration is reported (progress, loss history) and a failed
 simulation is a rejected step, not a NaN in the optimiser.
 
+Rugged losses (impacts make the loss jump between basins: a guess 50 % off in restitution
+can sit in another basin) get a global first stage, `starts=N`: N points of a Latin hypercube
+over the bounded box (McKay, Beckman & Conover, *Technometrics* 21 (1979) 239), uniform in
+the internal coordinate's logistic variable s (so in ln θ for positive parameters), plus the
+guess, are simulated as one vmapped batch, and LM starts from the one with the lowest cost.
+
 Uncertainty (e.g. Bates & Watts, *Nonlinear Regression Analysis*, 1988, §2.3): with residuals
 in noise units, the covariance of the estimates is `C = (J_θᵀ J_θ)⁻¹`, J_θ the Jacobian in
 physical units at the optimum; when the noise level was not given it is estimated,
@@ -150,11 +156,35 @@ class Model:
 
         self._jac = jax.jit(jax.jacfwd(evaluate, has_aux=True))
 
+        def cost(z):
+            r, (_, _, ok) = evaluate(z)
+            return 0.5 * jnp.sum(r * r), ok
+
+        self._costs = jax.jit(jax.vmap(cost))
+
+    def costs(self, zs):
+        """Costs ½|r|² of many points `zs` (k, p) as one vmapped batch; inf where the
+        simulation failed or gave non-finite residuals."""
+        cost, ok = self._costs(np.asarray(zs, dtype=float))
+        cost = np.asarray(cost)
+        return np.where(np.asarray(ok) & np.isfinite(cost), cost, np.inf)
+
     def __call__(self, z):
         jac, (r, model, ok) = self._jac(np.asarray(z, dtype=float))
         r = np.asarray(r)
         ok = bool(ok) and bool(np.all(np.isfinite(r))) and bool(np.all(np.isfinite(jac)))
         return r, np.asarray(jac), {n: np.asarray(v) for n, v in model.items()}, ok
+
+
+def latin_hypercube_starts(parameters, n: int, seed: int) -> np.ndarray:
+    """`n` internal points `z` (n, p) of a Latin hypercube over the parameters' bounds: one
+    point per stratum of s = logistic(z) in every coordinate, strata paired at random
+    (McKay et al. 1979), kept 0.5/n away from the bounds."""
+    rng = np.random.default_rng(seed)
+    p = len(parameters)
+    strata = np.stack([rng.permutation(n) for _ in range(p)], axis=1)
+    s = (strata + rng.uniform(0.25, 0.75, size=(n, p))) / n
+    return np.log(s / (1.0 - s))
 
 
 def levenberg_marquardt(
@@ -280,6 +310,8 @@ def fit(
     control: Mapping | None = None,
     max_iterations: int = 30,
     ftol: float = 1e-8,
+    starts: int = 0,
+    seed: int = 0,
     callback: Callable | None = None,
     **simulate_options,
 ) -> FitResult:
@@ -294,6 +326,9 @@ def fit(
       stage starting from the previous estimate). Uncertainties come from the last stage.
     - `control`: step control for the model runs (see `run_scene`); `simulate_options` go to
       `simulate` (e.g. `solver`).
+    - `starts`, `seed`: global first stage (module docstring): `starts` Latin-hypercube
+      points plus the guess, evaluated as one batch on the first residual stage; LM starts
+      from the best. 0 (default) starts from the guess.
     - `callback(entry)`: called after every LM trial step with a history entry.
 
     **Returns:** a `FitResult`.
@@ -309,9 +344,38 @@ def fit(
     z = internal_vector(params)
     history, stages, evaluations = [], [], 0
     model_initial = None
+    if starts < 0:
+        raise ValueError(f"starts = {starts!r} is invalid: it must be ≥ 0")
     for k, spec in enumerate(specs):
         comparison = Comparison(data, spec)
         model = Model(scene, params, base, comparison, control, simulate_options)
+        if k == 0 and starts:
+            candidates = np.vstack([z[None, :], latin_hypercube_starts(params, starts, seed)])
+            costs = model.costs(candidates)
+            if not np.isfinite(costs).any():
+                raise RuntimeError(
+                    f"no start point could be simulated (the guess and {starts} Latin-hypercube "
+                    "points); change the bounds or the step control"
+                )
+            best = int(np.argmin(costs))
+            evaluations += len(candidates)
+            stages.append(
+                dict(
+                    spec=dict(kind="multistart", starts=starts, seed=seed),
+                    iterations=0,
+                    converged=True,
+                    message=f"best of {len(candidates)} starts: "
+                    + ("the guess" if best == 0 else f"point {best}"),
+                    cost=float(costs[best]),
+                    guess_cost=float(costs[0]),
+                    start_params={
+                        p.name: float(p.to_physical(zk))
+                        for p, zk in zip(params, candidates[best], strict=True)
+                    },
+                    failed=int(np.sum(~np.isfinite(costs))),
+                )
+            )
+            z = candidates[best]
 
         def report(entry, k=k):
             entry = dict(entry, stage=k)
