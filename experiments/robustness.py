@@ -48,6 +48,9 @@ DOC = os.path.join(ROOT, "docs", "robustness.md")
 
 ENERGY_TOL = 2e-3  # stated acceptance: |residual| ≤ 0.2 % of the energy that moved
 AGREE_TOL = 1e-2  # outputs at rtol and rtol/10 agree to 1 % of their scale
+# Generalized-α and the diffrax path (Kvaerno5) at the same tolerances: outputs agree to 1 % of
+# their scale, or — where the path is chaotic (rattling) — the energy dissipated does.
+SOLVERS_TOL = 1e-2
 
 # --- impact family -----------------------------------------------------------------------------
 
@@ -158,12 +161,10 @@ def run_case(scene, params, t_end, control, outputs, n_save, gradient=True):
         record["dissipated_J"] = float(balance["dissipated"][-1])
         record["injected_J"] = float(balance["injected"][-1])
     # Same run, tighter tolerance (metered too: the meters do not change the dynamics).
-    plain = scene.build(params)
-    plain_init = scene.initial_state(params, plain)
     tight = dict(control, rtol=control["rtol"] / 10)
     if "atol" in tight:
         tight["atol"] = control["atol"] / 10
-    ref_mech = metered(plain)
+    ref_mech = metered(scene.build(params))
     ref = simulate(ref_mech, scene.initial_state(params, ref_mech), t_end, n_save=n_save, **tight)
     record["ref_status"] = ref.status()
     if finite and np.all(np.isfinite(np.asarray(ref.q))):
@@ -174,26 +175,40 @@ def run_case(scene, params, t_end, control, outputs, n_save, gradient=True):
     b = np.asarray(outputs(ref))
     scale = max(float(np.max(np.abs(b))), 1e-300)
     record["ref_difference_rel"] = float(np.max(np.abs(a - b)) / scale)
-    record["diffrax"] = diffrax_comparison(plain, plain_init, t_end, control, outputs, n_save, b)
+    record["diffrax"] = diffrax_comparison(scene, params, t_end, control, outputs, n_save, b)
+    if "dissipated_J" in record["diffrax"] and "energy_moved_J" in record:
+        record["diffrax"]["dissipated_difference_rel"] = (
+            abs(record["diffrax"]["dissipated_J"] - record["dissipated_J"])
+            / record["energy_moved_J"]
+        )
     if gradient:
         record.update(directional_derivative(scene, params, t_end, control, outputs, n_save))
     return record
 
 
-def diffrax_comparison(mech, init, t_end, control, outputs, n_save, reference):
-    """The same run with the diffrax implicit path (issue 5), if this jaxdeploy has it."""
-    try:
-        from jaxdeploy.solvers import solver_by_name  # noqa: F401
-    except ImportError:
-        return {"status": "n/a (issue 5 not merged)"}
-    traj = simulate(mech, init, t_end, n_save=n_save, solver="kvaerno5", **control)
+def diffrax_comparison(scene, params, t_end, control, outputs, n_save, reference):
+    """The same run with the diffrax path (`solver="kvaerno5"`, index-1 ODE with projection):
+    the outputs' difference to `reference` and the energy dissipated."""
+    mech = metered(scene.build(params))
+    traj = simulate(
+        mech,
+        scene.initial_state(params, mech),
+        t_end,
+        n_save=n_save,
+        solver="kvaerno5",
+        **control,
+    )
     out = np.asarray(outputs(traj))
     scale = max(float(np.max(np.abs(reference))), 1e-300)
-    return {
+    record = {
         "status": traj.status(),
         "difference_rel": float(np.max(np.abs(out - reference)) / scale),
         "steps": int(traj.stats["num_accepted_steps"]),
     }
+    if traj.ok:
+        balance = energy_balance(mech, traj.q, traj.v, traj.memory)
+        record["dissipated_J"] = float(balance["dissipated"][-1])
+    return record
 
 
 def directional_derivative(scene, params, t_end, control, outputs, n_save):
@@ -296,7 +311,10 @@ def _table(records, names=()):
             )
         )
         if "difference_rel" in r.get("diffrax", {}):
-            diffrax_txt = f"{r['diffrax']['status']}, Δ {r['diffrax']['difference_rel']:.1e}"
+            d = r["diffrax"]
+            diffrax_txt = f"{d['status']}, Δ {d['difference_rel']:.1e}"
+            if "dissipated_difference_rel" in d:
+                diffrax_txt += f", ΔD {d['dissipated_difference_rel']:.1e}"
         rows.append(
             f"| {name} | {r.get('status')} | {_fmt(r.get('finite'))} | "
             f"{_fmt(r.get('steps'), '.0f')} ({_fmt(r.get('rejected'), '.0f')}) | "
@@ -310,6 +328,15 @@ def _table(records, names=()):
     return head + "\n".join(rows) + "\n"
 
 
+def _solvers_agree(d):
+    """Kvaerno5 agrees with generalized-α: outputs within SOLVERS_TOL, or (chaotic rattling)
+    the dissipated energy."""
+    if d.get("status") != "ok":
+        return False
+    close = [d.get("difference_rel", np.inf), d.get("dissipated_difference_rel", np.inf)]
+    return min(close) <= SOLVERS_TOL
+
+
 def _verdict(records):
     cases = {k: r for k, r in records.items() if not k.startswith("_")}
     if not cases:
@@ -318,6 +345,7 @@ def _verdict(records):
     bad_energy = [k for k, r in cases.items() if r.get("energy_residual_rel", 1.0) > ENERGY_TOL]
     bad_ref = [k for k, r in cases.items() if r.get("ref_difference_rel", 0.0) > AGREE_TOL]
     bad_grad = [k for k, r in cases.items() if r.get("gradient_finite") is False]
+    bad_solvers = [k for k, r in cases.items() if not _solvers_agree(r.get("diffrax", {}))]
     worst = max((r.get("energy_residual_rel", 0.0) for r in cases.values()), default=0.0)
     min_step = min((r.get("min_step", np.inf) for r in cases.values()), default=np.inf)
     lines = [
@@ -330,6 +358,13 @@ def _verdict(records):
             f"differ by more than {AGREE_TOL:g} in {'; '.join(bad_ref)}"
             if bad_ref
             else f"all within {AGREE_TOL:g}"
+        ),  # fmt: skip
+        "* generalized-α vs the diffrax path (Kvaerno5): "
+        + (
+            f"outputs and dissipated energy both differ by more than {SOLVERS_TOL:g} in "
+            f"{'; '.join(bad_solvers)}"
+            if bad_solvers
+            else f"outputs or dissipated energy within {SOLVERS_TOL:g} in every case"
         ),  # fmt: skip
         "* directional derivatives: "
         + (f"NaN/inf in {'; '.join(bad_grad)}" if bad_grad else "finite in every case run"),
@@ -377,7 +412,9 @@ diffrax {versions.get("diffrax", "?")}, float64. Solver: generalized-α (ρ∞ =
   deploy runs cross the latch engagement and zero sliding speeds.
 * **wall**: seconds for the run being checked, compilation included for the first case of
   each compiled structure (σ = 0 and μ = 0 trace different code).
-* **diffrax path**: the same run with `solver="kvaerno5"` (issue 5) when this jaxdeploy has it.
+* **diffrax path**: the same run with `solver="kvaerno5"` (index-1 ODE with projection) at the
+  same tolerances: Δ of the outputs as above and ΔD of the dissipated energy (relative to the
+  energy moved). Stated tolerance: either within {SOLVERS_TOL:g}.
 
 ## Impact: journal in a fixed bearing, 2 ms
 
@@ -408,7 +445,8 @@ Both clearance joints changed together; step control {dict(DeployArray.default_c
   so the damping laws' stored v⁻ stayed at the floor `VELOCITY_FLOOR` and χ δ̇/v⁻ was
   thousands of times too large: a 10 m/s impact was captured dead. Fixed: v⁻ is now the
   largest approach speed of the current contact (unchanged for an ordinary impact, where the
-  approach only decelerates).
+  approach only decelerates), defined in continuous time and located on each step's
+  interpolant, so it no longer depends on the step sequence (docs/performance.md).
 * **Zero eccentricity.** `|e| = sqrt(e·e + ε²)` needs ε > 0 for a finite gradient at e = 0;
   ε = 0 is now refused. Hertz at δ = 0, the rough law at σ = 0, friction at v_t = 0 and the
   damping laws at v⁻ = 0 all have finite derivatives (`tests/test_contact_properties.py`,
