@@ -64,7 +64,7 @@ def plot(rows: list[Row], path: str, title: str) -> None:
         sel = [r for r in rows if r.family == family and r.status == "ok"]
         if not sel:
             continue
-        style = "-" if "scipy" not in family else "--"
+        style = "--" if "scipy" in family else (":" if "Exudyn" in family else "-")
         for ax, attr in zip(axes, ("error_window", "error_full"), strict=True):
             ax.loglog(
                 [getattr(r, attr) for r in sel],

@@ -28,7 +28,7 @@ class Config:
 
     family: str  # plot series, e.g. "gen-α fixed ρ∞=0.8"
     label: str  # e.g. "h=1e-06"
-    kind: str  # "jaxdeploy", "scipy-numpy", "scipy-jitted"
+    kind: str  # "jaxdeploy", "scipy-numpy", "scipy-jitted", "exudyn"
     solver: str
     rtol: float | None = None
     atol: float | None = None
@@ -53,8 +53,33 @@ class Row:
     status: str
 
 
+def exudyn_configurations(scene_name: str, quick: bool) -> list[Config]:
+    """Exudyn's generalized-α with fixed steps on slider_crank (`exudyn_peer.py`): none when
+    exudyn is not importable or for other scenes. Exudyn's generalized-α has no
+    error-controlled step size, so there is no adaptive Exudyn configuration."""
+    from .exudyn_peer import exudyn_available
+
+    if scene_name != "slider_crank" or not exudyn_available():
+        return []
+    family = "Exudyn gen-α fixed ρ∞={}"
+    if quick:
+        return [Config(family.format(0.8), "h=1e-06", "exudyn", "generalized_alpha", dt=1e-6)]
+    return [
+        Config(family.format(rho), f"h={h:.0e}", "exudyn", "generalized_alpha", dt=h, rho_inf=rho)
+        for rho, steps in ((0.8, (4e-6, 1e-6, 2.5e-7)), (0.5, (1e-6,)))
+        for h in steps
+    ]
+
+
 def configurations(scene_name: str, quick: bool) -> list[Config]:
-    """The configurations benchmarked on a scene (`quick`: a handful, for tests)."""
+    """The configurations benchmarked on a scene (`quick`: a handful, for tests), with the
+    Exudyn ones appended when exudyn is installed (`exudyn_configurations`)."""
+    return _own_and_scipy_configurations(scene_name, quick) + exudyn_configurations(
+        scene_name, quick
+    )
+
+
+def _own_and_scipy_configurations(scene_name: str, quick: bool) -> list[Config]:
     out = []
     if quick:
         out += [
@@ -181,6 +206,17 @@ def _run_scipy(cfg: Config, model, y0, ts, t_end):
     return run.ys[:, :n], run.n_steps, -1, -1, "ok" if run.ok else run.message
 
 
+def _run_exudyn(cfg: Config, model, ts, t_end):
+    spacing = float(ts[1] - ts[0]) if len(ts) > 1 else t_end
+    for length, name in ((t_end, "the horizon"), (spacing, "the output spacing")):
+        ratio = length / cfg.dt
+        if abs(ratio - round(ratio)) > 1e-6 * ratio:
+            nan = np.full((len(ts), 9), np.nan)
+            return nan, 0, -1, -1, f"skipped: h={cfg.dt:g} s does not divide {name}"
+    run = model.solve(cfg.dt, t_end, ts)
+    return run.q, run.steps, run.rejected, run.newton_iterations, run.message
+
+
 def run_benchmark(
     scene_name: str = "slider_crank",
     *,
@@ -214,11 +250,33 @@ def run_benchmark(
     t_end = float(ts[-1])
     models = {}
     rows = []
+    if scene_name == "slider_crank":
+        from .exudyn_peer import exudyn_available, exudyn_version, import_exudyn
+
+        if exudyn_available():
+            log(f"Exudyn {exudyn_version()}: its generalized-α runs as a peer")
+        else:
+            try:
+                import_exudyn()
+            except Exception as err:
+                log(f"  {err}")
     for cfg in configurations(scene_name, quick):
         if cfg.kind == "jaxdeploy":
 
             def call(cfg=cfg):
                 return _run_jaxdeploy(cfg, mech, s0, ts, t_end)
+
+        elif cfg.kind == "exudyn":
+            key = ("exudyn", cfg.rho_inf)
+            if key not in models:
+                from .exudyn_peer import ExudynSliderCrank
+
+                models[key] = ExudynSliderCrank(
+                    params, np.asarray(s0.q), np.asarray(s0.v), rho_inf=cfg.rho_inf
+                )
+
+            def call(cfg=cfg, model=models[key]):
+                return _run_exudyn(cfg, model, ts, t_end)
 
         else:
             if cfg.kind not in models:
@@ -249,7 +307,7 @@ def run_benchmark(
             walls.append(time.perf_counter() - start)
         wall = float(np.median(walls)) if walls else first
         # Compile time is meaningful for the jitted paths only (scipy-jitted: the RHS).
-        compile_s = max(first - wall, 0.0) if cfg.kind != "scipy-numpy" else 0.0
+        compile_s = max(first - wall, 0.0) if cfg.kind not in ("scipy-numpy", "exudyn") else 0.0
         window, full = eccentricity_error(mech, q, reference.q, ts, reference.window_end)
         row = Row(
             cfg.family,

@@ -1,0 +1,451 @@
+"""Exudyn peer for the work–precision benchmark: the Flores slider-crank in Exudyn, solved by
+Exudyn's own generalized-α.
+
+Exudyn (J. Gerstmayr, *Multibody Syst. Dyn.* 2023; `pip install exudyn`, tested with 1.13.6)
+is a C++ multibody code with a Python interface. The model, from its item library
+(docs: https://exudyn.readthedocs.io, "Items" and "Solver"; the shipped example
+`Examples/SliderCrank.py` builds an ideal slider-crank the same way):
+
+* crank, rod and slider: three `NodeRigidBody2D` + `ObjectRigidBody2D` (coordinates x, y, θ of
+  each centre of mass, reference configuration zero, so node coordinates *are* our q),
+  gravity by `LoadMassProportional` on each body;
+* ground–crank and crank–rod pins: `ObjectJointRevolute2D` between `MarkerBodyPosition`s;
+* crank drive θ₁ = ω t: `ObjectConnectorCoordinate` on θ₁ with `velocityLevel=True` and
+  offset ω (θ̇₁ = ω; with θ₁(0) = 0 and a constant ω this is θ₁ = ω t, and no Python
+  function is called by the solver);
+* slider on its guide: `ObjectConnectorCoordinate` fixing y₃ and θ₃ (as our `Prismatic`);
+* rod–slider joint: (a) ideal, `ObjectJointRevolute2D`; (b) with clearance, an
+  `ObjectConnectorCartesianSpringDamper` between the bearing centre (slider) and the journal
+  centre (rod small end) whose `springForceUserFunction` returns the contact force.
+
+That is 9 coordinates and 9 (ideal) or 7 (clearance) constraints, as jaxdeploy's model.
+
+**Contact law (b)** — the same as `jaxdeploy.mechanism.clearance` with the scene's
+`lankarani_nikravesh` Hertz law: with e = r_Pj − r_Pi (the connector's displacement, marker 1
+minus marker 0), |e| = sqrt(e·e + ε²) (ε = 1e-12 m), n = e/|e|, δ = |e| − c, δ̇ = ė·n,
+
+    F_N = max(0, K δ^{3/2} (1 + χ δ̇ / v_eff)),  v_eff = sqrt(max(v⁻, δ̇)² + v_floor²)   (δ > 0)
+
+K = (4/3) E* sqrt(R_j R_b / c), E* = E / (2(1 − ν²)) (Hertz, same material; Flores &
+Ambrósio 2004), χ = 3(1 − c_e²)/4 (Lankarani & Nikravesh 1990), v_floor = 1e-4 m/s
+(`jaxdeploy.contact.damping.VELOCITY_FLOOR`). The force on the journal is −F_N n; the model
+applies it at the journal *centre*, ours at the contact point P_j + R_j n: in the frictionless
+case the force passes through both points along n, so the moments about every body's centre
+are identical (same for the bearing).
+
+**v⁻ memory** — Exudyn has no memory variable for a user-function force, so it is kept in
+Python and updated by a `PostStepUserFunction` (called once after every accepted step, with
+the state at the step's end) with exactly the update of
+`RevoluteClearance.memory_after_step`: δ over the step is the cubic Hermite interpolant of the
+end values (δ, δ̇); a contact beginning inside the step counts from the onset located on it,
+and v⁻ is the running maximum of δ̇ over the contact including the interpolant's interior
+peak; outside contact v⁻ holds max(δ̇, 0) of the last step end. The force uses
+max(v⁻, δ̇) as ours. So the discrete model — not only the continuous one — is the same as
+jaxdeploy's for a given step sequence. Differences that remain: Exudyn's generalized-α
+(index 3, Arnold & Brüls 2007, Chung–Hulbert coefficients from the spectral radius ρ∞) uses
+its own Newton (modified Newton, residual-based tolerances, by default) and a finite-difference
+Jacobian of the user force; the constraint equations are its own (the same geometry).
+
+**Step size** — Exudyn's generalized-α has no error-controlled step size (its
+`automaticStepSize` applies to the explicit solvers with error estimates, e.g. DOPRI5); only
+`adaptiveStep`, which halves a step whose Newton iteration fails. Fixed steps are therefore the
+only Exudyn configurations, run with `adaptiveStep = False` so that a step is never silently
+repeated (a Newton failure is reported as a failed run, as in jaxdeploy's fixed-step mode).
+Everything else is Exudyn's default (modified Newton, relative tolerance 1e-8).
+
+The cost per step contains Python: the force user function is called for every residual and
+every Jacobian column of the connector, and the post-step function once per step. That is how
+an Exudyn user writes a contact law Exudyn does not provide (Exudyn's own contact models use a
+linear or a Hertz-like law without the restitution-calibrated damping and v⁻ memory).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+VELOCITY_FLOOR = 1e-4  # m/s, as jaxdeploy.contact.damping.VELOCITY_FLOOR
+ECCENTRICITY_SMOOTHING = 1e-12  # m, as RevoluteClearance.eccentricity_smoothing
+
+
+class ExudynUnavailable(RuntimeError):
+    """Exudyn is not installed (the `bench` extra); the Exudyn peer is skipped."""
+
+
+def import_exudyn():
+    """`(exudyn, exudyn.itemInterface)`, or `ExudynUnavailable` with the install hint."""
+    try:
+        import exudyn
+        import exudyn.itemInterface as items
+    except ImportError as err:  # pragma: no cover - depends on the environment
+        raise ExudynUnavailable(
+            f"exudyn is not importable ({err}); the Exudyn peer is skipped. Install it with "
+            "`pip install -e .[bench]` (or `pip install exudyn`)."
+        ) from err
+    return exudyn, items
+
+
+def exudyn_available() -> bool:
+    try:
+        import_exudyn()
+    except ExudynUnavailable:
+        return False
+    return True
+
+
+def exudyn_version() -> str:
+    exudyn, _ = import_exudyn()
+    return exudyn.__version__
+
+
+class _HermiteStep:
+    """δ over one step as the cubic Hermite interpolant of `(δ₀, δ̇₀)`, `(δ₁, δ̇₁)`, s ∈ [0, 1]
+    (the interpolant of `jaxdeploy.mechanism.clearance`, written again in numpy):
+    δ̇(s) = a + (6D − 4a − 2b) s + (3a + 3b − 6D) s², a = δ̇₀, b = δ̇₁, D = (δ₁ − δ₀)/h."""
+
+    def __init__(self, delta0, rate0, delta1, rate1, step):
+        mean = (delta1 - delta0) / step
+        self.delta0, self.delta1, self.rate0, self.step = delta0, delta1, rate0, step
+        self.c1 = 6.0 * mean - 4.0 * rate0 - 2.0 * rate1
+        self.c2 = 3.0 * rate0 + 3.0 * rate1 - 6.0 * mean
+
+    def rate(self, s):
+        return self.rate0 + self.c1 * s + self.c2 * s * s
+
+    def penetration(self, s):
+        return self.delta0 + self.step * (
+            self.rate0 * s + self.c1 * s * s / 2.0 + self.c2 * s**3 / 3.0
+        )
+
+    def crossing(self, level):
+        """s where δ(s) = level (δ₀ ≤ level < δ₁): linear estimate, then Newton on the cubic."""
+        rise = self.delta1 - self.delta0
+        s = min(max((level - self.delta0) / rise if rise > 0 else 0.0, 0.0), 1.0)
+        for _ in range(3):
+            slope = self.step * self.rate(s)
+            if slope > 0:
+                s = min(max(s - (self.penetration(s) - level) / slope, 0.0), 1.0)
+        return s
+
+    def max_rate(self, s_start):
+        best = max(self.rate(s_start), self.rate(1.0))
+        if self.c2 < 0:
+            vertex = -self.c1 / (2.0 * self.c2)
+            if s_start < vertex < 1.0:
+                best = max(best, self.rate(vertex))
+        return best
+
+
+@dataclass
+class ExudynRun:
+    """One Exudyn solve: states at the requested times and the solver's counters."""
+
+    q: np.ndarray  # (len(ts), 9)
+    v: np.ndarray  # (len(ts), 9)
+    steps: int
+    rejected: int  # always 0: fixed steps, adaptiveStep off (no step is repeated)
+    newton_iterations: int
+    jacobians: int
+    wall: float  # seconds in SolveDynamic
+    ok: bool
+    message: str
+
+
+class ExudynSliderCrank:
+    """The slider-crank of `jaxdeploy.scenes.SliderCrank` built in Exudyn (module docstring).
+
+    **Arguments:**
+    - `params`: the scene's resolved parameters (frictionless, smooth: μ = σ = 0 only).
+    - `q0`, `v0`: initial coordinates and velocities (crank, rod, slider; x, y, θ each), e.g.
+      from `SliderCrank.initial_state`.
+    - `ideal`: an ideal rod–slider revolute joint instead of the clearance contact.
+    - `rho_inf`: spectral radius at infinity of Exudyn's generalized-α.
+    """
+
+    def __init__(self, params, q0, v0, *, ideal=False, rho_inf=0.8):
+        p = {k: float(v) for k, v in params.items()}
+        if not ideal and (p.get("friction_coefficient", 0.0) != 0 or p.get("sigma", 0.0) != 0):
+            raise ValueError(
+                "ExudynSliderCrank models the frictionless, smooth (Hertz) contact only: "
+                f"friction_coefficient = {p.get('friction_coefficient')!r} and sigma = "
+                f"{p.get('sigma')!r} must both be 0"
+            )
+        if not 0.0 <= rho_inf <= 1.0:
+            raise ValueError(f"rho_inf = {rho_inf!r} is invalid: it must be in [0, 1]")
+        self.exu, self.items = import_exudyn()
+        self.params, self.ideal, self.rho_inf = p, ideal, rho_inf
+        self.q0 = np.asarray(q0, dtype=float).reshape(9)
+        self.v0 = np.asarray(v0, dtype=float).reshape(9)
+        rj, c = p["journal_radius"], p["clearance"]
+        e_star = p["youngs_modulus"] / (2.0 * (1.0 - p["poisson_ratio"] ** 2))
+        self.stiffness = 4.0 / 3.0 * e_star * math.sqrt(rj * (rj + c) / c)
+        self.chi = 0.75 * (1.0 - p["restitution"] ** 2)
+        self.clearance = c
+        self.memory = {}
+        # (end time of the step in which a contact ended, v⁻ of that contact), per contact:
+        # the largest approach speed reached, including a peak inside the last step.
+        self.contact_history = []
+        self._build()
+
+    # --- model -----------------------------------------------------------------------------
+
+    def _build(self):
+        exu, it = self.exu, self.items
+        p = self.params
+        r, ell = p["crank_length"], p["rod_length"]
+        self.container = exu.SystemContainer()
+        mbs = self.mbs = self.container.AddSystem()
+        ground = mbs.AddObject(it.ObjectGround())
+        ground_node = mbs.AddNode(it.NodePointGround())
+        self.nodes, bodies = [], []
+        inertia = [
+            (p["crank_mass"], p["crank_inertia"]),
+            (p["rod_mass"], p["rod_inertia"]),
+            (p["slider_mass"], p["slider_inertia"]),
+        ]
+        for k, (mass, moment) in enumerate(inertia):
+            node = mbs.AddNode(
+                it.NodeRigidBody2D(
+                    referenceCoordinates=[0.0, 0.0, 0.0],
+                    initialCoordinates=list(self.q0[3 * k : 3 * k + 3]),
+                    initialVelocities=list(self.v0[3 * k : 3 * k + 3]),
+                )
+            )
+            body = mbs.AddObject(it.ObjectRigidBody2D(mass=mass, inertia=moment, nodeNumber=node))
+            marker = mbs.AddMarker(it.MarkerBodyMass(bodyNumber=body))
+            mbs.AddLoad(
+                it.LoadMassProportional(markerNumber=marker, loadVector=[0, -p["gravity"], 0])
+            )
+            self.nodes.append(node)
+            bodies.append(body)
+        crank, rod, slider = bodies
+
+        def point(body, x):
+            return mbs.AddMarker(it.MarkerBodyPosition(bodyNumber=body, localPosition=[x, 0, 0]))
+
+        def coordinate(node, index):
+            return mbs.AddMarker(it.MarkerNodeCoordinate(nodeNumber=node, coordinate=index))
+
+        mbs.AddObject(
+            it.ObjectJointRevolute2D(markerNumbers=[point(ground, 0.0), point(crank, -r / 2)])
+        )
+        mbs.AddObject(
+            it.ObjectJointRevolute2D(markerNumbers=[point(crank, r / 2), point(rod, -ell / 2)])
+        )
+        fixed = coordinate(ground_node, 0)
+        for index in (1, 2):  # slider y and θ
+            mbs.AddObject(
+                it.ObjectConnectorCoordinate(
+                    markerNumbers=[fixed, coordinate(self.nodes[2], index)]
+                )
+            )
+        mbs.AddObject(
+            it.ObjectConnectorCoordinate(
+                markerNumbers=[fixed, coordinate(self.nodes[0], 2)],
+                offset=p["crank_speed"],
+                velocityLevel=True,
+            )
+        )
+        bearing, journal = point(slider, 0.0), point(rod, ell / 2)
+        if self.ideal:
+            mbs.AddObject(it.ObjectJointRevolute2D(markerNumbers=[bearing, journal]))
+        else:
+            mbs.AddObject(
+                it.ObjectConnectorCartesianSpringDamper(
+                    markerNumbers=[bearing, journal],
+                    stiffness=[0.0, 0.0, 0.0],
+                    damping=[0.0, 0.0, 0.0],
+                    springForceUserFunction=self._contact_force,
+                )
+            )
+            mbs.SetPostStepUserFunction(self._after_step)
+        self.sensors = [
+            (
+                mbs.AddSensor(
+                    it.SensorNode(
+                        nodeNumber=node,
+                        storeInternal=True,
+                        writeToFile=False,
+                        outputVariableType=kind,
+                    )
+                )
+            )
+            for kind in (exu.OutputVariableType.Coordinates, exu.OutputVariableType.Coordinates_t)
+            for node in self.nodes
+        ]
+        mbs.Assemble()
+        self.ode2_index = [mbs.GetNodeODE2Index(n) for n in self.nodes]
+        if self.ode2_index != [0, 3, 6]:
+            raise RuntimeError(f"unexpected Exudyn coordinate layout {self.ode2_index}")
+
+    # --- contact ---------------------------------------------------------------------------
+
+    def geometry(self, e, e_dot):
+        """`(δ, δ̇, n)` from the eccentricity e = r_Pj − r_Pi and its rate."""
+        norm_e = math.sqrt(e[0] * e[0] + e[1] * e[1] + ECCENTRICITY_SMOOTHING**2)
+        n = (e[0] / norm_e, e[1] / norm_e)
+        return norm_e - self.clearance, e_dot[0] * n[0] + e_dot[1] * n[1], n
+
+    def normal_force(self, delta, rate):
+        """F_N(δ, δ̇) with the current memory (module docstring)."""
+        if delta <= 0.0:
+            return 0.0
+        v_running = max(self.memory["impact_velocity"], rate)
+        v_eff = math.sqrt(v_running * v_running + VELOCITY_FLOOR**2)
+        return max(0.0, self.stiffness * delta**1.5 * (1.0 + self.chi * rate / v_eff))
+
+    def _contact_force(self, mbs, t, item, displacement, velocity, stiffness, damping, offset):
+        # Connector convention: the returned vector f acts as −f on marker 1 (journal) and +f on
+        # marker 0 (bearing), like a spring force k Δp; the journal gets −F_N n.
+        delta, rate, n = self.geometry(displacement, velocity)
+        fn = self.normal_force(delta, rate)
+        return [fn * n[0], fn * n[1], 0.0]
+
+    def eccentricity(self, q, v):
+        """e and ė from node coordinates (rod small end minus slider centre)."""
+        half = 0.5 * self.params["rod_length"]
+        c, s = math.cos(q[5]), math.sin(q[5])
+        e = (q[3] + half * c - q[6], q[4] + half * s - q[7])
+        e_dot = (v[3] - half * s * v[5] - v[6], v[4] + half * c * v[5] - v[7])
+        return e, e_dot
+
+    def _reset_memory(self):
+        delta, rate, _ = self.geometry(*self.eccentricity(self.q0, self.v0))
+        self.memory = {
+            "in_contact": delta > 0.0,
+            "impact_velocity": max(rate, 0.0),
+            "penetration": delta,
+            "penetration_rate": rate,
+            "time": 0.0,
+        }
+        self.contact_history = []
+
+    def _after_step(self, mbs, t):
+        """`RevoluteClearance.memory_after_step` on the accepted step that ended at t."""
+        current = self.exu.ConfigurationType.Current
+        q = mbs.systemData.GetODE2Coordinates(configuration=current)
+        v = mbs.systemData.GetODE2Coordinates_t(configuration=current)
+        delta, rate, _ = self.geometry(*self.eccentricity(q, v))
+        m = self.memory
+        step = t - m["time"]
+        if step > 0.0:
+            path = _HermiteStep(m["penetration"], m["penetration_rate"], delta, rate, step)
+            s_on = 0.0 if m["in_contact"] else path.crossing(0.0)
+            held = m["impact_velocity"] if m["in_contact"] else 0.0
+            now_in = delta > 0.0
+            if m["in_contact"] and not now_in:  # a contact ended inside this step
+                self.contact_history.append((t, max(held, path.max_rate(0.0))))
+            v_minus = max(held, path.max_rate(s_on)) if now_in else rate
+            m["impact_velocity"] = max(v_minus, 0.0)
+            m["in_contact"] = now_in
+        m["penetration"], m["penetration_rate"], m["time"] = delta, rate, t
+        return True
+
+    # --- solving ---------------------------------------------------------------------------
+
+    def settings(self, h, t_end, output_period=None):
+        """Exudyn `SimulationSettings`: generalized-α, fixed step h, no files written, sensors
+        stored in memory every `output_period` (None: no sensor output)."""
+        ss = self.exu.SimulationSettings()
+        n_steps = t_end / h
+        if abs(n_steps - round(n_steps)) > 1e-6 * n_steps:
+            raise ValueError(f"h = {h!r} s is invalid: it must divide t_end = {t_end!r} s")
+        ti = ss.timeIntegration
+        ti.numberOfSteps = int(round(n_steps))
+        ti.endTime = t_end
+        ti.generalizedAlpha.spectralRadius = self.rho_inf
+        ti.adaptiveStep = False
+        ti.verboseMode = 0
+        ss.solution.file.write = False
+        ss.solution.sensors.active = output_period is not None
+        if output_period is not None:
+            ss.solution.sensors.writePeriod = output_period
+        ss.show.computationTime = False
+        ss.show.statistics = False
+        return ss
+
+    def solve(self, h, t_end, ts=None) -> ExudynRun:
+        """Generalized-α with fixed step h from t = 0 to `t_end`; states at `ts` (equally
+        spaced from 0, with a spacing that h divides; None: no output)."""
+        exu = self.exu
+        period = None
+        if ts is not None:
+            ts = np.asarray(ts, dtype=float)
+            period = float(ts[1] - ts[0]) if ts.size > 1 else t_end
+            ratio = period / h
+            if abs(ratio - round(ratio)) > 1e-6 * ratio or not np.allclose(
+                np.diff(ts), period, rtol=1e-9, atol=0.0
+            ):
+                raise ValueError(
+                    f"ts must be equally spaced with a spacing that h = {h!r} s divides "
+                    f"(spacing {period!r} s)"
+                )
+        ss = self.settings(h, t_end, period)
+        self._reset_memory()
+        ok, message = True, "ok"
+        start = time.perf_counter()
+        try:
+            with _quiet():
+                ok = bool(exu.SolveDynamic(self.mbs, ss))
+        except Exception as err:  # Exudyn raises SolverError when Newton fails for good
+            ok, message = False, f"Exudyn failed: {err}"
+        wall = time.perf_counter() - start
+        solver = self.mbs.sys["dynamicSolver"]
+        stats = solver.it
+        failed_at = stats.currentTime
+        if ok and not np.isclose(failed_at, t_end, rtol=1e-9, atol=1e-15):
+            ok, message = False, f"Exudyn stopped at t = {failed_at:.6g} s"
+        elif not ok and message == "ok":
+            message = f"Exudyn failed at t = {failed_at:.6g} s"
+        q = v = np.empty((0, 9))
+        if ts is not None:
+            q, v = self._sampled(ts)
+        steps = int(stats.currentStepIndex) - 1
+        return ExudynRun(
+            q=q,
+            v=v,
+            steps=steps,
+            rejected=0,
+            newton_iterations=int(stats.newtonStepsCount),
+            jacobians=int(stats.newtonJacobiCount),
+            wall=wall,
+            ok=ok,
+            message=message,
+        )
+
+    def _sampled(self, ts):
+        """Sensor rows at `ts` (matched by time; rows that Exudyn did not write are NaN)."""
+        out = np.full((2, ts.size, 9), np.nan)
+        tol = 1e-9 * max(float(ts[-1]), 1e-300)
+        for k, sensor in enumerate(self.sensors):
+            data = np.atleast_2d(self.mbs.GetSensorStoredData(sensor))
+            if data.size == 0:
+                continue
+            idx = np.searchsorted(data[:, 0], ts - tol)
+            idx = np.clip(idx, 0, data.shape[0] - 1)
+            hit = np.abs(data[idx, 0] - ts) <= tol
+            kind, node = divmod(k, 3)
+            out[kind, hit, 3 * node : 3 * node + 3] = data[idx[hit], 1:4]
+        return out[0], out[1]
+
+
+class _quiet:
+    """Silence Exudyn's C++ console output (it prints solver messages on stdout)."""
+
+    def __enter__(self):
+        sys.stdout.flush()
+        self._saved = os.dup(1)
+        self._null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(self._null, 1)
+
+    def __exit__(self, *exc):
+        sys.stdout.flush()
+        os.dup2(self._saved, 1)
+        os.close(self._saved)
+        os.close(self._null)
+        return False
