@@ -251,15 +251,12 @@ def run_benchmark(
     models = {}
     rows = []
     if scene_name == "slider_crank":
-        from .exudyn_peer import exudyn_available, exudyn_version, import_exudyn
+        from .exudyn_peer import ExudynUnavailable, exudyn_version
 
-        if exudyn_available():
+        try:
             log(f"Exudyn {exudyn_version()}: its generalized-α runs as a peer")
-        else:
-            try:
-                import_exudyn()
-            except Exception as err:
-                log(f"  {err}")
+        except ExudynUnavailable as err:
+            log(f"  {err}")
     for cfg in configurations(scene_name, quick):
         if cfg.kind == "jaxdeploy":
 

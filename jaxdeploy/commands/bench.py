@@ -45,7 +45,14 @@ def run(args) -> int:
         return 2
     repeats = 1 if args.quick else args.repeats
     reference, rows = run_benchmark(args.scene, quick=args.quick, repeats=repeats, t_end=args.t_end)
-    options = dict(quick=args.quick, repeats=repeats, t_end=args.t_end)
+    from ..benchmarks.exudyn_peer import exudyn_available, exudyn_version
+
+    options = dict(
+        quick=args.quick,
+        repeats=repeats,
+        t_end=args.t_end,
+        exudyn=exudyn_version() if exudyn_available() else None,
+    )
     files = write_report(out, args.scene, reference, rows, options)
     print("wrote " + ", ".join(files))
     return 0
