@@ -1,6 +1,7 @@
 """Issue 5 targets, measured side by side in one run; writes docs/performance_targets.md.
 
-1. Per-step cost of generalized-α on the ideal slider-crank (Exudyn: ~14 µs/step) and on the
+1. Per-step cost of generalized-α on the ideal slider-crank (against Exudyn's: measured side by
+   side in experiments/exudyn_per_step.py) and on the
    clearance slider-crank, with a profile of one Newton iteration's parts (each part run
    10 000 times inside one compiled `lax.scan`, so dispatch overhead is excluded).
 2. Compile time of the default deploy_array simulation (first call − second call).
@@ -192,7 +193,7 @@ def main():
         "|---|---|---|",
         f"| gen-α step, ideal slider-crank (h = 1e-5, {ideal['steps']} steps, "
         f"{ideal['newton'] / ideal['steps']:.2f} Newton it./step) | {ideal['us']:.1f} µs | "
-        "≤ ~14 µs (Exudyn) |",
+        "≤ Exudyn's step (ratio: performance.md, Exudyn section) |",
         f"| gen-α step, clearance slider-crank (h = 1e-6, {clearance['steps']} steps, "
         f"{clearance['newton'] / clearance['steps']:.2f} Newton it./step) | "
         f"{clearance['us']:.1f} µs | – |",
