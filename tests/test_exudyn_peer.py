@@ -74,9 +74,10 @@ def clearance_peer():
     return p, mech, s0, ts, peer
 
 
-def test_clearance_matches_event_model_through_first_impact(clearance_peer):
+@pytest.mark.parametrize("force_function", ["python", "symbolic"])
+def test_clearance_matches_event_model_through_first_impact(clearance_peer, force_function):
     p, mech, s0, ts, peer = clearance_peer
-    model = ExudynSliderCrank(p, s0.q, s0.v)
+    model = ExudynSliderCrank(p, s0.q, s0.v, force_function=force_function)
     e_ref = eccentricities(mech, peer.ys[:, :9])
     errors = {}
     for h in (1e-6, 5e-7):
@@ -114,6 +115,8 @@ def test_invalid_inputs_are_refused():
     _, p, mech, s0 = _setup(ideal=False)
     with pytest.raises(ValueError, match="friction_coefficient"):
         ExudynSliderCrank({**p, "friction_coefficient": 0.1}, s0.q, s0.v)
+    with pytest.raises(ValueError, match="force_function"):
+        ExudynSliderCrank(p, s0.q, s0.v, force_function="cython")
     with pytest.raises(ValueError, match="rho_inf"):
         ExudynSliderCrank(p, s0.q, s0.v, rho_inf=1.5)
     model = ExudynSliderCrank(p, s0.q, s0.v)
@@ -140,7 +143,14 @@ def test_benchmark_runs_exudyn_rows(clearance_peer, monkeypatch):
     ]
     monkeypatch.setattr(wp, "configurations", lambda scene, quick: configs)
     _, rows = wp.run_benchmark("slider_crank", repeats=1, reference=reference, log=lambda m: None)
-    ok, skipped = rows
-    assert ok.kind == "exudyn" and ok.status == "ok" and ok.steps == 600 and ok.rejected == 0
-    assert 1e-5 < ok.error_window < 1e-3 and ok.wall_s > 0 and ok.newton_iterations >= 600
+    *ok, skipped = rows
+    assert {r.family for r in ok} == {
+        "Exudyn gen-α fixed ρ∞=0.8",
+        "Exudyn gen-α fixed ρ∞=0.8, symbolic force",
+    }
+    for r in ok:
+        assert r.kind == "exudyn" and r.status == "ok" and r.steps == 600 and r.rejected == 0
+        assert 1e-5 < r.error_window < 1e-3 and r.wall_s > 0 and r.newton_iterations >= 600
+    # The Python and the symbolic force functions are the same law.
+    assert ok[0].error_window == pytest.approx(ok[1].error_window, rel=1e-6)
     assert skipped.status.startswith("skipped: h=3e-06 s does not divide")

@@ -53,10 +53,13 @@ only Exudyn configurations, run with `adaptiveStep = False` so that a step is ne
 repeated (a Newton failure is reported as a failed run, as in jaxdeploy's fixed-step mode).
 Everything else is Exudyn's default (modified Newton, relative tolerance 1e-8).
 
-The cost per step contains Python: the force user function is called for every residual and
-every Jacobian column of the connector, and the post-step function once per step. That is how
-an Exudyn user writes a contact law Exudyn does not provide (Exudyn's own contact models use a
-linear or a Hertz-like law without the restitution-calibrated damping and v⁻ memory).
+**Cost** — with `force_function="python"` the force is a Python function, called for every
+residual and every Jacobian column of the connector; with `"symbolic"` the same law is an
+Exudyn symbolic user function (`exudyn.symbolic`, recorded once from Python and evaluated in
+C++; v⁻ is a named symbolic variable). Either way the post-step memory update is one Python
+call per step. That is how an Exudyn user writes a contact law Exudyn does not provide (its own
+contact models use a linear or a Hertz-like law without the restitution-calibrated damping and
+v⁻ memory).
 """
 
 from __future__ import annotations
@@ -71,6 +74,11 @@ import numpy as np
 
 VELOCITY_FLOOR = 1e-4  # m/s, as jaxdeploy.contact.damping.VELOCITY_FLOOR
 ECCENTRICITY_SMOOTHING = 1e-12  # m, as RevoluteClearance.eccentricity_smoothing
+
+
+# How the clearance force reaches Exudyn: a Python user function, or the same law as an Exudyn
+# symbolic user function (evaluated in C++; `ExudynSliderCrank._use_symbolic_force`).
+FORCE_FUNCTIONS = ("python", "symbolic")
 
 
 class ExudynUnavailable(RuntimeError):
@@ -165,10 +173,18 @@ class ExudynSliderCrank:
       from `SliderCrank.initial_state`.
     - `ideal`: an ideal rod–slider revolute joint instead of the clearance contact.
     - `rho_inf`: spectral radius at infinity of Exudyn's generalized-α.
+    - `force_function`: "python" (a Python user function) or "symbolic" (Exudyn's symbolic
+      user function, evaluated in C++; the v⁻ memory update stays a Python post-step call).
     """
 
-    def __init__(self, params, q0, v0, *, ideal=False, rho_inf=0.8):
+    def __init__(self, params, q0, v0, *, ideal=False, rho_inf=0.8, force_function="python"):
         p = {k: float(v) for k, v in params.items()}
+        if force_function not in FORCE_FUNCTIONS:
+            raise ValueError(
+                f"force_function = {force_function!r} is invalid; valid: "
+                + ", ".join(FORCE_FUNCTIONS)
+            )
+        self.force_function = force_function
         if not ideal and (p.get("friction_coefficient", 0.0) != 0 or p.get("sigma", 0.0) != 0):
             raise ValueError(
                 "ExudynSliderCrank models the frictionless, smooth (Hertz) contact only: "
@@ -255,7 +271,7 @@ class ExudynSliderCrank:
         if self.ideal:
             mbs.AddObject(it.ObjectJointRevolute2D(markerNumbers=[bearing, journal]))
         else:
-            mbs.AddObject(
+            self.contact_object = mbs.AddObject(
                 it.ObjectConnectorCartesianSpringDamper(
                     markerNumbers=[bearing, journal],
                     stiffness=[0.0, 0.0, 0.0],
@@ -263,6 +279,8 @@ class ExudynSliderCrank:
                     springForceUserFunction=self._contact_force,
                 )
             )
+            if self.force_function == "symbolic":
+                self._use_symbolic_force()
             mbs.SetPostStepUserFunction(self._after_step)
         self.sensors = [
             (
@@ -306,6 +324,41 @@ class ExudynSliderCrank:
         fn = self.normal_force(delta, rate)
         return [fn * n[0], fn * n[1], 0.0]
 
+    def _use_symbolic_force(self):
+        """Replace the Python force function by the same law as an Exudyn symbolic user
+        function (an expression tree recorded from Python once and evaluated in C++), with v⁻
+        as a named symbolic variable that the post-step function sets. `max(0, δ)^{3/2}` is
+        written `δ₊ sqrt(δ₊)`, which equals K δ^{3/2} for δ > 0 and 0 otherwise."""
+        from exudyn.advancedUtilities import CreateSymbolicUserFunction
+
+        esym = self.exu.symbolic
+        v_minus = esym.Real(f"vMinus{id(self)}", 0.0)
+        stiffness, chi, clearance = self.stiffness, self.chi, self.clearance
+
+        def force(mbs, t, item, u, v, k, d, offset):
+            norm = esym.sqrt(u[0] * u[0] + u[1] * u[1] + ECCENTRICITY_SMOOTHING**2)
+            n0, n1 = u[0] / norm, u[1] / norm
+            rate = v[0] * n0 + v[1] * n1
+            running = esym.max(v_minus, rate)
+            v_eff = esym.sqrt(running * running + VELOCITY_FLOOR**2)
+            inside = esym.max(norm - clearance, 0.0)
+            fn = esym.max(0.0, stiffness * inside * esym.sqrt(inside) * (1.0 + chi * rate / v_eff))
+            return [fn * n0, fn * n1, 0.0]
+
+        function = CreateSymbolicUserFunction(
+            self.mbs,
+            force,
+            "springForceUserFunction",
+            itemTypeName="ObjectConnectorCartesianSpringDamper",
+        )
+        self.mbs.SetObjectParameter(self.contact_object, "springForceUserFunction", function)
+        # Both must outlive the solver (Exudyn keeps a reference to the expression tree only).
+        self._symbolic = (v_minus, function)
+
+    def _memory_changed(self):
+        if self.force_function == "symbolic":
+            self._symbolic[0].SetValue(float(self.memory["impact_velocity"]))
+
     def eccentricity(self, q, v):
         """e and ė from node coordinates (rod small end minus slider centre)."""
         half = 0.5 * self.params["rod_length"]
@@ -324,6 +377,7 @@ class ExudynSliderCrank:
             "time": 0.0,
         }
         self.contact_history = []
+        self._memory_changed()
 
     def _after_step(self, mbs, t):
         """`RevoluteClearance.memory_after_step` on the accepted step that ended at t."""
@@ -344,6 +398,7 @@ class ExudynSliderCrank:
             m["impact_velocity"] = max(v_minus, 0.0)
             m["in_contact"] = now_in
         m["penetration"], m["penetration_rate"], m["time"] = delta, rate, t
+        self._memory_changed()
         return True
 
     # --- solving ---------------------------------------------------------------------------

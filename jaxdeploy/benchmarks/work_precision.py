@@ -35,6 +35,7 @@ class Config:
     dt: float | None = None
     rho_inf: float = 0.8
     dt_max: float | None = None
+    force_function: str = "python"  # Exudyn's clearance force: "python" or "symbolic"
 
 
 @dataclass
@@ -61,12 +62,24 @@ def exudyn_configurations(scene_name: str, quick: bool) -> list[Config]:
 
     if scene_name != "slider_crank" or not exudyn_available():
         return []
-    family = "Exudyn gen-α fixed ρ∞={}"
+    sweep = [  # (ρ∞, force function, steps)
+        (0.8, "python", (4e-6, 1e-6, 2.5e-7)),
+        (0.8, "symbolic", (4e-6, 1e-6, 2.5e-7)),
+        (0.5, "python", (1e-6,)),
+    ]
     if quick:
-        return [Config(family.format(0.8), "h=1e-06", "exudyn", "generalized_alpha", dt=1e-6)]
+        sweep = [(0.8, "python", (1e-6,)), (0.8, "symbolic", (1e-6,))]
     return [
-        Config(family.format(rho), f"h={h:.0e}", "exudyn", "generalized_alpha", dt=h, rho_inf=rho)
-        for rho, steps in ((0.8, (4e-6, 1e-6, 2.5e-7)), (0.5, (1e-6,)))
+        Config(
+            f"Exudyn gen-α fixed ρ∞={rho}" + (", symbolic force" if force == "symbolic" else ""),
+            f"h={h:.0e}",
+            "exudyn",
+            "generalized_alpha",
+            dt=h,
+            rho_inf=rho,
+            force_function=force,
+        )
+        for rho, force, steps in sweep
         for h in steps
     ]
 
@@ -264,12 +277,16 @@ def run_benchmark(
                 return _run_jaxdeploy(cfg, mech, s0, ts, t_end)
 
         elif cfg.kind == "exudyn":
-            key = ("exudyn", cfg.rho_inf)
+            key = ("exudyn", cfg.rho_inf, cfg.force_function)
             if key not in models:
                 from .exudyn_peer import ExudynSliderCrank
 
                 models[key] = ExudynSliderCrank(
-                    params, np.asarray(s0.q), np.asarray(s0.v), rho_inf=cfg.rho_inf
+                    params,
+                    np.asarray(s0.q),
+                    np.asarray(s0.v),
+                    rho_inf=cfg.rho_inf,
+                    force_function=cfg.force_function,
                 )
 
             def call(cfg=cfg, model=models[key]):
