@@ -242,4 +242,6 @@ def simulate(
     stats = dict(sol.stats)
     if sol.solver_state is not None and hasattr(sol.solver_state, "newton_iterations"):
         stats["num_newton_iterations"] = sol.solver_state.newton_iterations
+    if sol.solver_state is not None and hasattr(sol.solver_state, "jacobian_evaluations"):
+        stats["num_jacobian_evaluations"] = sol.solver_state.jacobian_evaluations
     return Trajectory(sol.ts, ys.q, ys.v, ys.qdd, ys.lam, ys.memory, sol.result, stats)

@@ -143,24 +143,50 @@ class Mechanism(eqx.Module):
         s0 = jnp.zeros((), dtype=q.dtype)
         return -jax.jvp(first, (s0,), (jnp.ones_like(s0),))[1]
 
+    def constraint_jacobian_transpose_product(self, q, t, mu) -> Array:
+        """`Φ_q(q, t)ᵀ μ`, by one reverse-mode pass through `Φ` (Φ_q is never formed).
+
+        Cheaper than `constraint_jacobian(q, t).T @ mu`, which needs one forward pass per
+        coordinate; the Newton residual of the integrators evaluates it every iteration.
+        """
+        if not self.n_constraints:
+            return jnp.zeros_like(q)
+        _, pullback = jax.vjp(lambda x: self.constraints(x, t), q)
+        return pullback(mu)[0]
+
     def generalized_forces(self, q, v, t, memory) -> Array:
-        """`Q(q, q̇, t)`: the sum of every element's forces and torques."""
+        """`Q(q, q̇, t)`: the sum of every element's forces and torques.
+
+        A wrench `(F, P, τ)` on body k adds `F` to `Q_{x,y}` and `(P − r_k) × F + τ` to `Q_θ`.
+        The contributions are collected per body at trace time and summed once, then
+        concatenated: no scatter (`.at[].add`) per wrench, which on CPU costs one kernel each
+        (and a scatter per case under `vmap`).
+        """
         kin = self.kinematics(q, v)
-        forces = jnp.zeros_like(q)
+        linear = [[] for _ in self.bodies]
+        angular = [[] for _ in self.bodies]
         for element, mem in zip(self.elements, memory, strict=True):
             for w in element.wrenches(kin, t, mem):
                 if w.body == GROUND:
                     continue
                 k = self.body_index(w.body)
                 if w.force is not None:
-                    f = jnp.asarray(w.force)
-                    forces = forces.at[3 * k : 3 * k + 2].add(f)
+                    f = jnp.asarray(w.force, dtype=q.dtype)
+                    linear[k].append(f)
                     if w.point is not None:
                         arm = w.point - kin.origin(w.body)
-                        forces = forces.at[3 * k + 2].add(cross(arm, f))
+                        angular[k].append(cross(arm, f))
                 if w.torque is not None:
-                    forces = forces.at[3 * k + 2].add(w.torque)
-        return forces
+                    angular[k].append(jnp.asarray(w.torque, dtype=q.dtype))
+        zero2 = jnp.zeros(2, dtype=q.dtype)
+        zero = jnp.zeros((), dtype=q.dtype)
+        per_body = [
+            jnp.concatenate([sum(lin, zero2), jnp.reshape(sum(ang, zero), (1,))])
+            for lin, ang in zip(linear, angular, strict=True)
+        ]
+        if not per_body:
+            return jnp.zeros_like(q)
+        return jnp.concatenate(per_body)
 
     # --- memory (state that changes between steps only) ---------------------------------------
 
