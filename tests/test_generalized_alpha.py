@@ -200,7 +200,7 @@ def test_modified_newton_matches_newton_within_the_newton_tolerance():
     assert np.all(np.abs(np.asarray(modified.q - full.q)) <= tolerance)
     steps = int(modified.stats["num_accepted_steps"])
     assert int(full.stats["num_jacobian_evaluations"]) >= steps  # one per iteration
-    assert int(modified.stats["num_jacobian_evaluations"]) < 0.1 * steps
+    assert int(modified.stats["num_jacobian_evaluations"]) < 0.25 * steps
 
 
 def test_modified_newton_error_is_negligible_against_the_step_error():
