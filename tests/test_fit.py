@@ -218,3 +218,24 @@ def test_multistart_escapes_the_local_minimum_a_far_guess_falls_into():
     se = result.standard_errors["length"]
     assert abs(result.estimates["length"] - 0.8) < 3 * se and se < 0.01
     assert 0.5 < result.reduced_chi2 < 1.5
+
+
+def test_a_parameter_driven_onto_its_bound_gets_an_infinite_error_not_a_crash():
+    """y = a x with the truth a = 2 outside the bounds (0.1, 1.5): LM drives a onto 1.5, where
+    the bounded map's dθ/dz vanishes; the curvature then reports it as not determined."""
+    x = np.linspace(0, 1, 30)
+    y = 2.0 * x
+    params = [FitParameter("a", 1.0, 0.1, 1.5), FitParameter("b", 0.0, -1.0, 1.0)]
+
+    def model(z):
+        theta = np.array([float(p.to_physical(zk)) for p, zk in zip(params, z, strict=True)])
+        dtheta = np.array([p.dphysical_dz(zk) for p, zk in zip(params, z, strict=True)])
+        design = np.column_stack([x, np.ones_like(x)])
+        return (design @ theta - y) / 0.01, design * dtheta / 0.01, None, True
+
+    z0 = np.array([p.to_internal(p.guess) for p in params])
+    z, r, jac, _, _ = levenberg_marquardt(model, z0, max_iterations=200)
+    z[0] = 800.0  # as far as LM gets it: the logistic map is flat to roundoff
+    theta, se, *_ = _curvature(params, z, r, jac, noise_known=True)
+    assert theta[0] == pytest.approx(1.5) and params[0].dphysical_dz(z[0]) == 0.0
+    assert se[0] == np.inf and np.isfinite(se[1])

@@ -276,7 +276,12 @@ def _curvature(parameters, z, r, jac, noise_known):
     """Covariance, standard errors, correlations and singular values at the optimum."""
     theta = np.array([float(p.to_physical(zk)) for p, zk in zip(parameters, z, strict=True)])
     dtheta = np.array([p.dphysical_dz(zk) for p, zk in zip(parameters, z, strict=True)])
-    jac_theta = jac / dtheta  # chain rule: ∂r/∂θ = ∂r/∂z / (dθ/dz)
+    # A parameter driven onto its bound has dθ/dz = 0 (the logistic map saturates): the data
+    # say nothing about it there beyond "at the bound", so its column is left out (zero),
+    # which gives it an infinite standard error below.
+    at_bound = ~(np.abs(dtheta) > 0) | ~np.isfinite(dtheta)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        jac_theta = np.where(at_bound, 0.0, jac / np.where(at_bound, 1.0, dtheta))  # ∂r/∂θ
     jac_rel = jac_theta * theta  # ∂r/∂ln θ: columns comparable across units
     _, s, vt = np.linalg.svd(jac_rel, full_matrices=False)
     # Moore–Penrose inverse of the curvature: directions it does not see (singular values at
