@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from jaxdeploy.benchmarks.peers import SliderCrankNumpy, solve_with_onset_events
+from jaxdeploy.benchmarks.peers import SliderCrankNumpy
 from jaxdeploy.benchmarks.reference import eccentricities
 from jaxdeploy.scenes import Impact, Pendulum, SliderCrank
 from jaxdeploy.simulation import simulate
@@ -42,19 +42,7 @@ def test_kvaerno5_matches_independent_numpy_model_through_first_impact(slider_cr
     tr = simulate(mech, s0, WINDOW, ts=ts, solver="kvaerno5", rtol=1e-9, atol=1e-12)
     assert tr.ok, tr.status()
     model = SliderCrankNumpy(params)
-    y0 = np.concatenate([np.asarray(s0.q), np.asarray(s0.v)])
-    peer = solve_with_onset_events(
-        model.rhs,
-        model.penetration,
-        model.penetration_rate,
-        model.penetration_acceleration,
-        y0,
-        (0, WINDOW),
-        ts,
-        "DOP853",
-        1e-11,
-        1e-13,
-    )
+    peer = model.solve(s0, WINDOW, ts, "DOP853", 1e-11, 1e-13)
     # The first impact: onset, then the approach keeps speeding up (the rod drives the journal
     # in) until its peak, which sets v⁻.
     assert peer.ok and [kind for _, kind, _ in peer.events] == ["onset", "peak"], peer.events
@@ -80,19 +68,7 @@ def test_fixed_step_generalized_alpha_converges_at_second_order_through_first_im
     params, mech, s0 = slider_crank
     ts = np.linspace(0.0, WINDOW, 36)
     model = SliderCrankNumpy(params)
-    y0 = np.concatenate([np.asarray(s0.q), np.asarray(s0.v)])
-    peer = solve_with_onset_events(
-        model.rhs,
-        model.penetration,
-        model.penetration_rate,
-        model.penetration_acceleration,
-        y0,
-        (0, WINDOW),
-        ts,
-        "DOP853",
-        1e-12,
-        1e-14,
-    )
+    peer = model.solve(s0, WINDOW, ts, "DOP853", 1e-12, 1e-14)
     assert peer.ok
     errors = []
     for h in (4e-7, 2e-7, 1e-7):

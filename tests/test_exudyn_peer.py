@@ -11,7 +11,7 @@ import pytest
 pytest.importorskip("exudyn")
 
 from jaxdeploy.benchmarks.exudyn_peer import ExudynSliderCrank  # noqa: E402
-from jaxdeploy.benchmarks.peers import SliderCrankNumpy, solve_with_onset_events  # noqa: E402
+from jaxdeploy.benchmarks.peers import SliderCrankNumpy  # noqa: E402
 from jaxdeploy.benchmarks.reference import eccentricities  # noqa: E402
 from jaxdeploy.scenes import SliderCrank  # noqa: E402
 from jaxdeploy.scenes.slider_crank import ideal_slider_kinematics  # noqa: E402
@@ -57,19 +57,7 @@ def clearance_peer():
     _, p, mech, s0 = _setup(ideal=False)
     ts = np.linspace(0.0, T_IMPACT, 61)
     model = SliderCrankNumpy(p)
-    y0 = np.concatenate([np.asarray(s0.q), np.asarray(s0.v)])
-    peer = solve_with_onset_events(
-        model.rhs,
-        model.penetration,
-        model.penetration_rate,
-        model.penetration_acceleration,
-        y0,
-        (0.0, T_IMPACT),
-        ts,
-        "DOP853",
-        1e-12,
-        1e-14,
-    )
+    peer = model.solve(s0, T_IMPACT, ts, "DOP853", 1e-12, 1e-14)
     assert peer.ok
     return p, mech, s0, ts, peer
 

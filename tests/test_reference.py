@@ -3,7 +3,7 @@ model (numpy right-hand side, exact onset events, scipy DOP853)."""
 
 import numpy as np
 
-from jaxdeploy.benchmarks.peers import SliderCrankNumpy, solve_with_onset_events
+from jaxdeploy.benchmarks.peers import SliderCrankNumpy
 from jaxdeploy.benchmarks.reference import eccentricities, reference_solution
 from jaxdeploy.scenes import SliderCrank
 
@@ -22,19 +22,7 @@ def test_reference_converged_and_matches_independent_model():
     mech = scene.build(ref.params)
     s0 = scene.initial_state(ref.params, mech)
     model = SliderCrankNumpy(ref.params)
-    y0 = np.concatenate([np.asarray(s0.q), np.asarray(s0.v)])
-    peer = solve_with_onset_events(
-        model.rhs,
-        model.penetration,
-        model.penetration_rate,
-        model.penetration_acceleration,
-        y0,
-        (0.0, T_END),
-        ref.ts,
-        "DOP853",
-        1e-12,
-        1e-14,
-    )
+    peer = model.solve(s0, T_END, ref.ts, "DOP853", 1e-12, 1e-14)
     assert peer.ok and [kind for _, kind, _ in peer.events] == ["onset", "peak"]
     diff = np.linalg.norm(
         eccentricities(mech, ref.q) - eccentricities(mech, peer.ys[:, :9]), axis=-1

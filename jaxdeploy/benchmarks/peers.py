@@ -99,6 +99,23 @@ class SliderCrankNumpy:
     def penetration_rate(self, y):
         return self.contact_kinematics(y[:9], y[9:])[1]
 
+    def solve(self, initial, t_end, ts, method="DOP853", rtol=1e-10, atol=1e-12) -> PeerRun:
+        """`solve_with_onset_events` on this model from `initial` (a state with `q`, `v`, e.g.
+        jaxdeploy's `consistent_state`) over [0, `t_end`], states at `ts`."""
+        y0 = np.concatenate([np.asarray(initial.q), np.asarray(initial.v)])
+        return solve_with_onset_events(
+            self.rhs,
+            self.penetration,
+            self.penetration_rate,
+            self.penetration_acceleration,
+            y0,
+            (0.0, t_end),
+            ts,
+            method,
+            rtol,
+            atol,
+        )
+
     def penetration_acceleration(self, t, y, v_minus):
         """`δ̈ = ë·n + (|ė|² − (ė·n)²)/|e|`, `e` = journal centre − bearing centre (δ̇ = ė·n:
         the contact points' rotation terms are normal to n)."""
