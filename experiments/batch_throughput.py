@@ -161,10 +161,15 @@ time per case; target ≥ 2). {r["batch_ok"]} of {r["batch"]} cases succeeded. {
 
 A batch advances as one `while` loop until its slowest case finishes, every case taking every
 step of the batch (finished or easy cases are masked), so it pays the step count of its slowest
-case ({r["batch_steps_max"]} against {r["single_steps_max"]} here). Any gain has to come from
-amortising XLA's per-operation overhead on CPU over many small (21 × 21) systems; under `vmap`
-the solver's data-dependent branches and Newton loops also run for the whole batch (both
-branches of a `cond` are evaluated, a `while` runs until the last case converges).
+case ({r["batch_steps_max"]} against {r["single_steps_max"]} here). Inside a step, the Newton
+`while` loop runs until the last case has converged, and modified Newton forms a new iteration
+matrix whenever *any* case asks for one (a batched `while` rather than a `cond`, so no case pays
+for it when none asks; `jaxdeploy.solvers.generalized_alpha._run_if`). A gain would have to come
+from amortising XLA's per-operation overhead on CPU over the batch; but since the solver
+reuses its factorised matrix, a single run's step is mostly the residual (forces, rough
+contact law, constraints), which is arithmetic rather than overhead: measured in one compiled
+loop (`experiments/step_profile.py` style, deploy_array), the residual costs about as much per
+case in a vmapped batch of 64 as alone, so batching has little to amortise.
 """
 
 
