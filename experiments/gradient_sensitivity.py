@@ -1,4 +1,8 @@
-"""Where pointwise derivatives of deploy_array outputs stop meaning anything.
+"""Where pointwise derivatives of deploy_array outputs stop meaning anything — measured with
+the raw adaptive loop (`replay_steps=False`), i.e. the way derivatives were taken before
+adaptive steps were replayed; kept to document that failure (docs/identification.md). The
+replayed derivative, checked against differences over the same steps, is measured by
+`experiments/gradient_horizon.py`.
 
 Forward-mode AD through the adaptive generalized-α solver (`diffrax.ForwardMode`) gives
 dy(t)/dc for the whole 2 s run (c: the root hinge's clearance `panel1_clearance`; y: panel
@@ -55,7 +59,7 @@ def main():
         def f(c):
             params = {**base, PARAM: c}
             traj = run_scene(scene, params, T_END, ts=ts, control={"rtol": rtol},
-                             adjoint=dfx.ForwardMode())  # fmt: skip
+                             adjoint=dfx.ForwardMode(), replay_steps=False)  # fmt: skip
             ch = scene.channels(scene.build(params), traj)
             y = jnp.stack([ch[n] for n in CHANNELS])
             return y, y

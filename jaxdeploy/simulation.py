@@ -75,7 +75,10 @@ class Trajectory(eqx.Module):
     """Saved states and run statistics.
 
     `ts` (N,), `q`, `v`, `qdd` (N, n), `lam` (N, m), `memory` (pytree, leading axis N);
-    `result` (a diffrax RESULTS code), `stats` (steps, accepted, rejected, Newton iterations).
+    `result` (a diffrax RESULTS code), `stats` (steps, accepted, rejected, Newton iterations);
+    `step_times`: with `simulate(..., replay_steps=...)`, the ends of the steps taken (padded
+    with +inf; pass them as `replay_steps` to integrate other parameters over the same steps),
+    otherwise None.
     """
 
     ts: jax.Array
@@ -86,6 +89,7 @@ class Trajectory(eqx.Module):
     memory: tuple
     result: dfx.RESULTS
     stats: dict
+    step_times: jax.Array | None = None
 
     @property
     def ok(self) -> bool:
@@ -118,6 +122,78 @@ def _check_step_control(rtol, atol, dt_min, dt_max, max_steps):
             )
     if not (isinstance(max_steps, int) and max_steps > 0):
         raise ValueError(f"max_steps = {max_steps!r} is invalid: it must be a positive integer")
+
+
+class ReplaySteps(dfx.AbstractStepSizeController):
+    """Step to prescribed times and accept every step: `times` are the ends of the steps
+    (increasing, the last one `t_end`), padded at the back with +inf to a fixed length.
+
+    Used to replay the accepted steps of an adaptive run (`simulate(..., replay_steps=True)`),
+    so that a differentiated run makes no step decision of its own (see `simulate`). If that
+    run failed, its times stop short of `t_end`: the replay then stops there with `failure`
+    (the failed run's result), never bridging the gap with one long step.
+    """
+
+    times: jax.Array
+    failure: dfx.RESULTS
+
+    def wrap(self, direction):
+        return self
+
+    def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
+        return self.times[0], jnp.array(1)
+
+    def adapt_step_size(self, t0, t1, y0, y1_candidate, args, y_error, error_order, index):
+        # Past the last accepted time the padding (+inf) is clipped to t_end by diffrax.
+        next_t1 = self.times[jnp.minimum(index, self.times.shape[0] - 1)]
+        result = dfx.RESULTS.where(jnp.isfinite(next_t1), dfx.RESULTS.successful, self.failure)
+        return True, t1, next_t1, False, index + 1, result
+
+
+@eqx.filter_jit
+def _accepted_step_times(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps):
+    """The ends of the accepted steps of an adaptive run (padded with +inf to `max_steps`),
+    and the run's result."""
+    sol = dfx.diffeqsolve(
+        MechanismTerm(mechanism),
+        solver,
+        t0=t0,
+        t1=t_end,
+        dt0=dt0,
+        y0=y0,
+        saveat=dfx.SaveAt(steps=True, fn=lambda t, y, args: None),
+        stepsize_controller=controller,
+        max_steps=max_steps,
+        throw=False,
+        adjoint=dfx.RecursiveCheckpointAdjoint(),
+    )
+    return sol.ts, sol.result
+
+
+def _replay_times(times, t0, t_end):
+    """Step end times given to `replay_steps`, checked when concrete (1-D, increasing, in
+    (t0, t_end], the last finite one t_end, then only +inf padding) and stripped of the
+    padding."""
+    times = jnp.asarray(times, dtype=float)
+    if is_concrete((times, t0, t_end)):
+        values = np.asarray(times)
+        finite = values[np.isfinite(values)]
+        n = finite.size
+        if (
+            values.ndim != 1
+            or n == 0
+            or not np.all(np.isposinf(values[n:]))
+            or np.any(np.diff(finite) <= 0)
+            or finite[0] <= float(t0)
+            or finite[-1] != float(t_end)
+        ):
+            raise ValueError(
+                "replay_steps is invalid: step end times must be a 1-D increasing array in "
+                f"(t0, t_end] = ({float(t0):g}, {float(t_end):g}] s ending at t_end, padded "
+                "with +inf only (e.g. a run's Trajectory.step_times)"
+            )
+        times = times[:n]
+    return times
 
 
 def _save_times(t0, t_end, n_save, ts):
@@ -180,6 +256,7 @@ def simulate(
     progress: bool = False,
     adjoint=None,
     step_ts=None,
+    replay_steps=False,
 ) -> Trajectory:
     """Integrate `mechanism` from `initial` (a `consistent_state`) to `t_end`.
 
@@ -197,6 +274,19 @@ def simulate(
       states are step end points rather than interpolated; used by the reference solutions).
     - `adjoint`: a diffrax adjoint (default `RecursiveCheckpointAdjoint`: reverse mode with
       checkpointing; use `diffrax.ForwardMode()` for forward-mode derivatives).
+    - `replay_steps`: for derivatives of an adaptive run (needs `rtol`/`atol`). The run is
+      made twice: an undifferentiated adaptive run chooses the steps, then the mechanism is
+      integrated again over exactly its accepted steps (`ReplaySteps`), and that second run
+      is returned and differentiated. The derivative is then that of one discrete map — the
+      solver on the accepted step sequence, step sizes held fixed — and the same in forward
+      mode, in reverse mode and for every number of checkpoints. Without it an adaptive run
+      re-decides its steps in every program that evaluates it (the forward-mode program, each
+      checkpointed recomputation of the reverse pass); accept/reject decisions flip on
+      round-off, and the derivative belongs to a different step sequence in each (measured:
+      docs/identification.md). Costs one extra forward run. An array instead of True: the
+      step end times to replay (e.g. another run's `Trajectory.step_times`): every run then
+      integrates over the same steps, which is what a finite difference of a replayed run
+      must do.
 
     **Returns:** a `Trajectory`; check `.ok` / `.status()`: a failed solve keeps the states it
     finished and says when and why it stopped.
@@ -225,6 +315,19 @@ def simulate(
         if not control.adaptive:
             raise ValueError("step_ts needs adaptive steps (give rtol/atol)")
         controller = dfx.ClipStepSizeController(controller, step_ts=jnp.asarray(step_ts, float))
+    step_times = None
+    if replay_steps is True:
+        if not control.adaptive:
+            raise ValueError("replay_steps needs adaptive steps (give rtol/atol)")
+        frozen = jax.tree.map(
+            lambda x: jax.lax.stop_gradient(x) if eqx.is_array(x) else x,
+            (mechanism, y0, t0, t_end, dt0),
+        )
+        step_times, result = _accepted_step_times(*frozen, solver, controller, control.max_steps)
+        controller = ReplaySteps(step_times, result)
+    elif replay_steps is not False and replay_steps is not None:
+        step_times = _replay_times(replay_steps, t0, t_end)
+        controller = ReplaySteps(step_times, dfx.RESULTS.successful)
     sol = _solve(
         mechanism,
         y0,
@@ -244,4 +347,4 @@ def simulate(
         stats["num_newton_iterations"] = sol.solver_state.newton_iterations
     if sol.solver_state is not None and hasattr(sol.solver_state, "jacobian_evaluations"):
         stats["num_jacobian_evaluations"] = sol.solver_state.jacobian_evaluations
-    return Trajectory(sol.ts, ys.q, ys.v, ys.qdd, ys.lam, ys.memory, sol.result, stats)
+    return Trajectory(sol.ts, ys.q, ys.v, ys.qdd, ys.lam, ys.memory, sol.result, stats, step_times)

@@ -1,15 +1,17 @@
 """Derivatives of simulation outputs with respect to contact parameters, reverse mode
 (checkpointed) and forward mode through the generalized-α solver, against central finite
-differences. Fixed steps, so AD and the differences differentiate the same discrete map; short
-windows through one or two impacts, where pointwise derivatives are meaningful (how they
-degrade over many impacts: docs/identification.md)."""
+differences. Fixed steps, or adaptive steps replayed (`replay_steps`: the differentiated run
+and every finite-difference run step over the unperturbed run's accepted steps), so AD and
+the differences differentiate the same discrete map; short windows through one or a few
+impacts, where pointwise derivatives are meaningful (how they degrade over many impacts:
+docs/identification.md)."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxdeploy.batch import simulate_batch
+from jaxdeploy.fit import central_differences as fit_central_differences
 from jaxdeploy.fit import output_function, parameter_jacobian
 from jaxdeploy.scenes import DeployArray, Impact, SliderCrank
 
@@ -17,23 +19,9 @@ FIXED = {"rtol": None, "atol": None, "dt_max": None}
 
 
 def central_differences(scene, base, wrt, output, t_end, ts, control, rel_step):
-    """(f(θ + h e_k) − f(θ − h e_k)) / 2h for each parameter, all 2p runs as one batch;
-    `rel_step`: h/|θ|, one number or `{name: h/|θ|}`."""
-    steps = rel_step if isinstance(rel_step, dict) else dict.fromkeys(wrt, rel_step)
-    cases = []
-    for name in wrt:
-        h = steps[name] * abs(base[name])
-        cases += [{**base, name: base[name] + h}, {**base, name: base[name] - h}]
-    batch = simulate_batch(scene, cases, t_end, ts=ts, control=control)
-    assert all(batch.ok), batch.statuses()
-    values = [
-        np.asarray(output(scene.channels(batch.mechanism(i), batch.case(i))))
-        for i in range(batch.size)
-    ]
-    return {
-        name: (values[2 * k] - values[2 * k + 1]) / (2 * steps[name] * abs(base[name]))
-        for k, name in enumerate(wrt)
-    }
+    return fit_central_differences(
+        scene, base, wrt, output, t_end, rel_step, ts=ts, control=control
+    )
 
 
 def test_impact_forward_and_reverse_mode_match_central_differences():
@@ -139,3 +127,130 @@ def test_scalar_loss_gradient_is_the_jacobian_contracted():
         scene, base, ["restitution"], output, 2e-4, mode="forward", ts=ts, control=control
     )["restitution"]
     np.testing.assert_allclose(grad, jnp.dot(weights, jac), rtol=1e-10)
+
+
+def test_impact_adaptive_steps_replayed_match_central_differences():
+    """Adaptive steps (the impact scene's default control): forward and reverse mode (two
+    checkpoint counts) of the replayed run agree with each other to round-off and with
+    central differences over the same steps."""
+    import diffrax as dfx
+
+    scene = Impact(damping="lankarani_nikravesh")
+    base = scene.resolve_params(
+        {"impact_speed": 0.5, "clearance": 2e-5, "sigma": 1e-7, "restitution": 0.7}
+    )
+    wrt = ["clearance", "sigma", "restitution", "stiffness"]
+    t_end = 2.5e-4
+    ts = jnp.linspace(0.0, t_end, 11)
+
+    def output(ch):
+        return jnp.concatenate([ch["journal_x"][4:], 1e-6 * ch["journal_ax"][4:]])
+
+    fwd = parameter_jacobian(scene, base, wrt, output, t_end, mode="forward", ts=ts)
+    rev = parameter_jacobian(scene, base, wrt, output, t_end, ts=ts)
+    rev_few = parameter_jacobian(
+        scene, base, wrt, output, t_end, ts=ts,
+        adjoint=dfx.RecursiveCheckpointAdjoint(checkpoints=5),
+    )  # fmt: skip
+    fd = fit_central_differences(scene, base, wrt, output, t_end, 1e-4, ts=ts)
+    for name in wrt:
+        scale = np.abs(fd[name]).max()
+        assert scale > 0, name
+        np.testing.assert_allclose(rev[name], fwd[name], rtol=0, atol=1e-10 * scale, err_msg=name)
+        np.testing.assert_allclose(
+            rev_few[name], rev[name], rtol=0, atol=1e-10 * scale, err_msg=name
+        )
+        np.testing.assert_allclose(rev[name], fd[name], rtol=0, atol=1e-5 * scale, err_msg=name)
+
+
+@pytest.mark.slow  # three slider-crank compilations and a revolution each: ~4 min
+def test_slider_crank_adaptive_derivative_independent_of_mode_and_checkpoints():
+    """One crank revolution (12 ms, ~860 adaptive steps, many impacts). Before steps were
+    replayed, forward mode and reverse mode with default and with 7 checkpoints disagreed
+    by 1–3 % here: each program re-decided the accept/reject sequence, and round-off flipped
+    some decisions. With `replay_steps` all three differentiate the same discrete map."""
+    import diffrax as dfx
+
+    scene = SliderCrank()
+    base = scene.resolve_params({"sigma": 1e-6, "friction_coefficient": 0.05})
+    t_end = 0.012
+    ts = jnp.linspace(0.0, t_end, 11)
+
+    def output(ch):
+        return jnp.concatenate([ch["slider_x"][5:] - ch["crank_x"][5:], 1e-3 * ch["rod_theta"][5:]])
+
+    wrt = ["restitution"]
+    fwd = parameter_jacobian(scene, base, wrt, output, t_end, mode="forward", ts=ts)
+    for checkpoints in (None, 7):
+        rev = parameter_jacobian(
+            scene, base, wrt, output, t_end, ts=ts,
+            adjoint=dfx.RecursiveCheckpointAdjoint(checkpoints=checkpoints),
+        )  # fmt: skip
+        scale = np.abs(fwd["restitution"]).max()
+        assert scale > 0
+        np.testing.assert_allclose(
+            rev["restitution"], fwd["restitution"], rtol=0, atol=1e-10 * scale
+        )
+
+
+@pytest.mark.slow
+def test_slider_crank_adaptive_matches_central_differences():
+    """Slider-crank, adaptive steps (scene default rtol 1e-6), through its first impact:
+    w.r.t. c, σ, c_e, μ and E, reverse mode against differences over the same steps."""
+    scene = SliderCrank()
+    base = scene.resolve_params({"sigma": 1e-6, "friction_coefficient": 0.05})
+    wrt = ["clearance", "sigma", "restitution", "friction_coefficient", "youngs_modulus"]
+    t_end = 5e-4
+    ts = jnp.linspace(0.0, t_end, 11)
+
+    def output(ch):
+        return jnp.concatenate(
+            [ch["slider_x"][5:] - ch["crank_x"][5:], 1e-3 * ch["rod_theta"][5:],
+             1e-5 * ch["slider_ax"][5:]]
+        )  # fmt: skip
+
+    rev = parameter_jacobian(scene, base, wrt, output, t_end, ts=ts)
+    steps = {"clearance": 1e-4, "sigma": 1e-2, "restitution": 1e-4,
+             "friction_coefficient": 1e-3, "youngs_modulus": 1e-4}  # fmt: skip
+    fd = fit_central_differences(scene, base, wrt, output, t_end, steps, ts=ts)
+    for name in wrt:
+        scale = np.abs(fd[name]).max()
+        assert scale > 0, name
+        np.testing.assert_allclose(rev[name], fd[name], rtol=0, atol=1e-4 * scale, err_msg=name)
+
+
+def test_impact_diffrax_path_kvaerno5_matches_central_differences():
+    """The index-1 ODE path (`solver="kvaerno5"`, adaptive, steps replayed) through a rough,
+    damped impact: reverse mode (two checkpoint counts) matches differences over the same
+    steps. (Forward mode does not go through diffrax's implicit solvers: their stage solve is
+    a `custom_vjp`.) Tight tolerances: Kvaerno5's stage equations are solved to the
+    controller's rtol/atol, and a difference of iterated solutions sees that iteration error
+    divided by the step."""
+    import diffrax as dfx
+
+    scene = Impact(damping="lankarani_nikravesh")
+    base = scene.resolve_params(
+        {"impact_speed": 0.5, "clearance": 2e-5, "sigma": 1e-7, "restitution": 0.7}
+    )
+    wrt = ["clearance", "sigma", "restitution", "stiffness"]
+    t_end = 2.5e-4
+    ts = jnp.linspace(0.0, t_end, 11)
+    control = {"rtol": 1e-10, "atol": 1e-14, "dt_max": 1e-6}
+
+    def output(ch):
+        return jnp.concatenate([ch["journal_x"][4:], 1e-6 * ch["journal_ax"][4:]])
+
+    options = dict(ts=ts, control=control, solver="kvaerno5")
+    rev = parameter_jacobian(scene, base, wrt, output, t_end, **options)
+    rev_few = parameter_jacobian(
+        scene, base, wrt, output, t_end, adjoint=dfx.RecursiveCheckpointAdjoint(checkpoints=5),
+        **options,
+    )  # fmt: skip
+    fd = fit_central_differences(scene, base, wrt, output, t_end, 1e-4, **options)
+    for name in wrt:
+        scale = np.abs(fd[name]).max()
+        assert scale > 0, name
+        np.testing.assert_allclose(
+            rev_few[name], rev[name], rtol=0, atol=1e-10 * scale, err_msg=name
+        )
+        np.testing.assert_allclose(rev[name], fd[name], rtol=0, atol=1e-4 * scale, err_msg=name)

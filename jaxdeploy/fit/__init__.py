@@ -9,7 +9,7 @@ docs/identification.md.
 """
 
 from ._data import MeasurementError, Measurements, load_measurements
-from ._derivatives import output_function, parameter_jacobian
+from ._derivatives import central_differences, output_function, parameter_jacobian
 from ._fit import FitResult, fit, levenberg_marquardt
 from ._parameters import FitParameter, make_parameters, parse_param_spec
 from ._residuals import Comparison, ResidualSpec
@@ -17,6 +17,7 @@ from ._synthetic import model_channels, synthesize
 
 __all__ = [
     "Comparison",
+    "central_differences",
     "FitParameter",
     "FitResult",
     "MeasurementError",

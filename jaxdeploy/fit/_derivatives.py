@@ -7,9 +7,15 @@ theorem and the step sizes held fixed (the step-size controller runs under
 number of checkpoints, not of steps) suits many parameters and a scalar loss; forward mode
 (`diffrax.ForwardMode`, one tangent per parameter) suits few parameters and many outputs.
 
-With adaptive steps a finite difference also sees the change of the step sequence, which
-AD does not; the two agree to about the integration tolerance divided by the parameter step.
-With a fixed step both differentiate the same map.
+Adaptive runs are differentiated with `replay_steps=True` (the default here): an
+undifferentiated adaptive run chooses the steps, and the run over exactly those steps is the
+one differentiated. Without it each program that evaluates the run (the forward-mode program,
+each checkpointed recomputation of the reverse pass) re-decides its steps, decisions flip on
+round-off, and forward mode, reverse mode and reverse mode with another number of checkpoints
+differentiate different step sequences (docs/identification.md). The matching finite
+difference replays the unperturbed run's steps too (`central_differences`); a difference of
+re-adapted runs also contains the change of the step sequence, a term of the order of the
+integration error that AD does not (and should not) see.
 """
 
 from __future__ import annotations
@@ -30,15 +36,20 @@ def output_function(
     ts=None,
     n_save: int = 1001,
     control: Mapping | None = None,
+    adjoint=None,
     **simulate_options,
 ):
     """`(f, x0)`: `f({name: value}) = output(channels)` for the parameters `wrt` (the others
     fixed at `params`), a pure JAX function to `jit`, `grad`, `jacrev`/`jacfwd` or `vmap`;
     `x0` the values of `wrt` in `params`. `output(channels)` maps the scene's channel dict
-    (`Scene.channels`, arrays over the saved times) to an array or scalar."""
+    (`Scene.channels`, arrays over the saved times) to an array or scalar. With adaptive
+    steps the run replays its own accepted steps (`replay_steps=True`, see the module
+    docstring); pass `replay_steps=False` to differentiate the raw adaptive loop. `adjoint`:
+    a diffrax adjoint instead of the mode's default (e.g. `RecursiveCheckpointAdjoint` with
+    a chosen number of checkpoints)."""
     import diffrax as dfx
 
-    from ..batch import run_scene
+    from ..batch import run_scene, step_control
 
     if mode not in MODES:
         raise ValueError(f"mode = {mode!r} is invalid; valid: {', '.join(MODES)}")
@@ -46,7 +57,10 @@ def output_function(
     for name in wrt:
         if name not in base:
             raise ValueError(f"unknown parameter {name!r} for scene {scene.name!r}")
-    adjoint = dfx.RecursiveCheckpointAdjoint() if mode == "reverse" else dfx.ForwardMode()
+    if adjoint is None:
+        adjoint = dfx.RecursiveCheckpointAdjoint() if mode == "reverse" else dfx.ForwardMode()
+    if _adaptive(step_control(scene, control)):
+        simulate_options.setdefault("replay_steps", True)
 
     def f(x):
         p = {**base, **x}
@@ -71,3 +85,68 @@ def parameter_jacobian(
     f, x0 = output_function(scene, params, wrt, output, t_end, mode=mode, **options)
     transform = jax.jacrev if mode == "reverse" else jax.jacfwd
     return jax.jit(transform(f))(x0)
+
+
+def _adaptive(control: Mapping) -> bool:
+    return control.get("rtol") is not None or control.get("atol") is not None
+
+
+def central_differences(
+    scene,
+    params: Mapping,
+    wrt: Sequence[str],
+    output: Callable,
+    t_end: float,
+    rel_step,
+    *,
+    ts=None,
+    n_save: int = 1001,
+    control: Mapping | None = None,
+    replay: bool = True,
+    **simulate_options,
+) -> dict:
+    """`{name: (f(θ + h e_k) − f(θ − h e_k)) / 2h}`, `h = rel_step·|θ_k|` (`rel_step` one
+    number or `{name: step}`), all 2p runs as one vmapped batch; `output` as in
+    `output_function`.
+
+    With adaptive steps and `replay=True` (default) every perturbed run integrates over the
+    accepted steps of the unperturbed run (`simulate(..., replay_steps=times)`): the
+    difference then approximates the derivative of the same discrete map as
+    `parameter_jacobian`, with a truncation error O(h²) instead of the O(tol/h) noise of
+    re-adapted steps. `replay=False` differences re-adapted runs (what a user perturbing
+    the model sees)."""
+    import jax
+    import numpy as np
+
+    from ..batch import run_scene, simulate_batch, step_control
+
+    base = scene.resolve_params(params)
+    steps = rel_step if isinstance(rel_step, Mapping) else dict.fromkeys(wrt, rel_step)
+    if replay and _adaptive(step_control(scene, control)):
+        reference = jax.jit(
+            lambda: run_scene(
+                scene, base, t_end, ts=ts, n_save=n_save, control=control,
+                replay_steps=True, **simulate_options,
+            )
+        )()  # fmt: skip
+        if not reference.ok:
+            raise RuntimeError(f"the unperturbed run failed: {reference.status()}")
+        simulate_options = {**simulate_options, "replay_steps": np.asarray(reference.step_times)}
+    cases = []
+    for name in wrt:
+        h = steps[name] * abs(base[name])
+        cases += [{**base, name: base[name] + h}, {**base, name: base[name] - h}]
+    batch = simulate_batch(
+        scene, cases, t_end, ts=ts, n_save=n_save, control=control, **simulate_options
+    )
+    if not all(batch.ok):
+        failed = [s for s in batch.statuses() if s != "ok"]
+        raise RuntimeError(f"a perturbed run failed: {failed[0]}")
+    values = [
+        np.asarray(output(scene.channels(batch.mechanism(i), batch.case(i))))
+        for i in range(batch.size)
+    ]
+    return {
+        name: (values[2 * k] - values[2 * k + 1]) / (2 * steps[name] * abs(base[name]))
+        for k, name in enumerate(wrt)
+    }

@@ -133,9 +133,14 @@ class Model:
         import jax
         import jax.numpy as jnp
 
-        from ..batch import run_scene
+        from ..batch import run_scene, step_control
+        from ._derivatives import _adaptive
 
         names = list(comparison.names)
+        if _adaptive(step_control(scene, control)):
+            # Adaptive steps: differentiate the run over its own accepted steps (see
+            # `simulate(..., replay_steps=True)`), not a loop that re-decides them.
+            simulate_options = {"replay_steps": True, **simulate_options}
 
         def evaluate(z):
             params = dict(fixed)
