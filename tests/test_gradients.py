@@ -220,12 +220,12 @@ def test_slider_crank_adaptive_matches_central_differences():
 
 
 def test_impact_diffrax_path_kvaerno5_matches_central_differences():
-    """The index-1 ODE path (`solver="kvaerno5"`, adaptive, steps replayed) through a rough,
-    damped impact: reverse mode (two checkpoint counts) matches differences over the same
-    steps. (Forward mode does not go through diffrax's implicit solvers: their stage solve is
-    a `custom_vjp`.) Tight tolerances: Kvaerno5's stage equations are solved to the
-    controller's rtol/atol, and a difference of iterated solutions sees that iteration error
-    divided by the step."""
+    """The index-1 ODE path (`solver="kvaerno5"`, fixed step; its stage equations then solved
+    to 1e-10/1e-12) through a rough, damped impact: reverse mode (two checkpoint counts)
+    matches central differences. (Forward mode does not go through diffrax's implicit
+    solvers: their stage solve is a `custom_vjp`. Replayed adaptive steps are not used here:
+    at the controller's tolerances the perturbed replays' Chord iteration fails to converge
+    at the contact onset.)"""
     import diffrax as dfx
 
     scene = Impact(damping="lankarani_nikravesh")
@@ -235,7 +235,7 @@ def test_impact_diffrax_path_kvaerno5_matches_central_differences():
     wrt = ["clearance", "sigma", "restitution", "stiffness"]
     t_end = 2.5e-4
     ts = jnp.linspace(0.0, t_end, 11)
-    control = {"rtol": 1e-10, "atol": 1e-14, "dt_max": 1e-6}
+    control = {**FIXED, "dt": 5e-7}
 
     def output(ch):
         return jnp.concatenate([ch["journal_x"][4:], 1e-6 * ch["journal_ax"][4:]])
