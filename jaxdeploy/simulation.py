@@ -150,21 +150,37 @@ class ReplaySteps(dfx.AbstractStepSizeController):
         return True, t1, next_t1, False, index + 1, result
 
 
-@eqx.filter_jit
-def _accepted_step_times(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps):
-    """The ends of the accepted steps of an adaptive run (padded with +inf to `max_steps`),
-    and the run's result."""
-    sol = dfx.diffeqsolve(
+def _integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **options):
+    """`diffrax.diffeqsolve` of the mechanism from `y0` over [t0, t_end], never throwing: a
+    failure is reported in the solution's `result`. `options`: `saveat`, `adjoint`, …"""
+    return dfx.diffeqsolve(
         MechanismTerm(mechanism),
         solver,
         t0=t0,
         t1=t_end,
         dt0=dt0,
         y0=y0,
-        saveat=dfx.SaveAt(steps=True, fn=lambda t, y, args: None),
         stepsize_controller=controller,
         max_steps=max_steps,
         throw=False,
+        **options,
+    )
+
+
+@eqx.filter_jit
+def _accepted_step_times(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps):
+    """The ends of the accepted steps of an adaptive run (padded with +inf to `max_steps`),
+    and the run's result."""
+    sol = _integrate(
+        mechanism,
+        y0,
+        t0,
+        t_end,
+        dt0,
+        solver,
+        controller,
+        max_steps,
+        saveat=dfx.SaveAt(steps=True, fn=lambda t, y, args: None),
         adjoint=dfx.RecursiveCheckpointAdjoint(),
     )
     return sol.ts, sol.result
@@ -221,21 +237,19 @@ def _save_times(t0, t_end, n_save, ts):
 @eqx.filter_jit
 def _solve(mechanism, y0, t0, t_end, dt0, ts, solver, controller, max_steps, progress, adjoint):
     meter = dfx.TqdmProgressMeter() if progress else dfx.NoProgressMeter()
-    sol = dfx.diffeqsolve(
-        MechanismTerm(mechanism),
+    return _integrate(
+        mechanism,
+        y0,
+        t0,
+        t_end,
+        dt0,
         solver,
-        t0=t0,
-        t1=t_end,
-        dt0=dt0,
-        y0=y0,
+        controller,
+        max_steps,
         saveat=dfx.SaveAt(ts=ts, solver_state=True),
-        stepsize_controller=controller,
-        max_steps=max_steps,
-        throw=False,
         progress_meter=meter,
         adjoint=adjoint,
     )
-    return sol
 
 
 def simulate(
