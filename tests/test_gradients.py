@@ -18,6 +18,23 @@ from jaxdeploy.scenes import DeployArray, Impact, SliderCrank
 FIXED = {"rtol": None, "atol": None, "dt_max": None}
 
 
+def _impact_case():
+    """A rough, damped impact (scene, parameters, the four differentiated parameter names,
+    t_end, save times) and its output: journal position and scaled acceleration at the
+    saved times through the impact."""
+    scene = Impact(damping="lankarani_nikravesh")
+    base = scene.resolve_params(
+        {"impact_speed": 0.5, "clearance": 2e-5, "sigma": 1e-7, "restitution": 0.7}
+    )
+    wrt = ["clearance", "sigma", "restitution", "stiffness"]
+    t_end = 2.5e-4
+
+    def output(ch):
+        return jnp.concatenate([ch["journal_x"][4:], 1e-6 * ch["journal_ax"][4:]])
+
+    return scene, base, wrt, t_end, jnp.linspace(0.0, t_end, 11), output
+
+
 def central_differences(scene, base, wrt, output, t_end, ts, control, rel_step):
     return fit_central_differences(
         scene, base, wrt, output, t_end, rel_step, ts=ts, control=control
@@ -27,17 +44,8 @@ def central_differences(scene, base, wrt, output, t_end, ts, control, rel_step):
 def test_impact_forward_and_reverse_mode_match_central_differences():
     """Journal position and acceleration at times through a rough, damped impact: d/d
     (clearance c, roughness σ, restitution c_e, stiffness K), vector output."""
-    scene = Impact(damping="lankarani_nikravesh")
-    base = scene.resolve_params(
-        {"impact_speed": 0.5, "clearance": 2e-5, "sigma": 1e-7, "restitution": 0.7}
-    )
-    wrt = ["clearance", "sigma", "restitution", "stiffness"]
-    t_end = 2.5e-4
-    ts = jnp.linspace(0.0, t_end, 11)
+    scene, base, wrt, t_end, ts, output = _impact_case()
     control = {**FIXED, "dt": 5e-7}
-
-    def output(ch):
-        return jnp.concatenate([ch["journal_x"][4:], 1e-6 * ch["journal_ax"][4:]])
 
     rev = parameter_jacobian(scene, base, wrt, output, t_end, ts=ts, control=control)
     fwd = parameter_jacobian(
@@ -142,16 +150,7 @@ def test_impact_adaptive_steps_replayed_match_central_differences():
     central differences over the same steps."""
     import diffrax as dfx
 
-    scene = Impact(damping="lankarani_nikravesh")
-    base = scene.resolve_params(
-        {"impact_speed": 0.5, "clearance": 2e-5, "sigma": 1e-7, "restitution": 0.7}
-    )
-    wrt = ["clearance", "sigma", "restitution", "stiffness"]
-    t_end = 2.5e-4
-    ts = jnp.linspace(0.0, t_end, 11)
-
-    def output(ch):
-        return jnp.concatenate([ch["journal_x"][4:], 1e-6 * ch["journal_ax"][4:]])
+    scene, base, wrt, t_end, ts, output = _impact_case()
 
     fwd = parameter_jacobian(scene, base, wrt, output, t_end, mode="forward", ts=ts)
     rev = parameter_jacobian(scene, base, wrt, output, t_end, ts=ts)
@@ -235,17 +234,8 @@ def test_impact_diffrax_path_kvaerno5_matches_central_differences():
     at the contact onset.)"""
     import diffrax as dfx
 
-    scene = Impact(damping="lankarani_nikravesh")
-    base = scene.resolve_params(
-        {"impact_speed": 0.5, "clearance": 2e-5, "sigma": 1e-7, "restitution": 0.7}
-    )
-    wrt = ["clearance", "sigma", "restitution", "stiffness"]
-    t_end = 2.5e-4
-    ts = jnp.linspace(0.0, t_end, 11)
+    scene, base, wrt, t_end, ts, output = _impact_case()
     control = {**FIXED, "dt": 5e-7}
-
-    def output(ch):
-        return jnp.concatenate([ch["journal_x"][4:], 1e-6 * ch["journal_ax"][4:]])
 
     options = dict(ts=ts, control=control, solver="kvaerno5")
     rev = parameter_jacobian(scene, base, wrt, output, t_end, **options)
