@@ -275,29 +275,36 @@ def solve_with_onset_events(
     """`scipy.integrate.solve_ivp` from event to event, keeping v⁻ (the running maximum of the
     approach speed over the current contact) exactly:
 
-    * onset, δ = 0 rising: v⁻ = δ̇ there;
+    * onset, δ = 0 rising (armed out of contact): v⁻ = δ̇ there;
     * peak of the approach, δ̈ = 0 falling while in contact with δ̇ above v⁻ (between the two
-      the right-hand side's `max(v⁻, δ̇)` *is* the running maximum): v⁻ = δ̇ there.
+      the right-hand side's `max(v⁻, δ̇)` *is* the running maximum): v⁻ = δ̇ there;
+    * separation, δ = 0 falling (armed in contact): the contact ends, the onset is re-armed.
 
     Each event stops the integration, updates v⁻ and restarts. Returns the states at `ts`
-    (from each segment's dense output); `n_events` counts both kinds."""
+    (from each segment's dense output); `n_events` counts every kind."""
     from scipy.integrate import solve_ivp
 
-    # A segment that starts at an onset starts with δ = 0 (to the root finder's accuracy): the
-    # event is offset by 1e-13 m there, so that it cannot fire again at once. A peak event is
-    # armed only while δ̇ exceeds v⁻ by more than 1e-12 m/s, which a segment starting at a
-    # peak (δ̇ = v⁻) does not.
-    offset = [0.0]
+    # A segment starts at an event with δ = 0 or δ̈ = 0 only to the root finder's accuracy, so
+    # an event function that is armed at a restart could fire again at once, forever (it did:
+    # 10 000 onsets within 1.5 ms). Hence each event is armed only in the state it leaves:
+    # onset out of contact, separation in contact, and the peak only while δ̇ exceeds v⁻ by
+    # more than 1e-12 m/s, which a segment starting at a peak (δ̇ = v⁻) does not. A disarmed
+    # event returns a constant (no sign change is invented); arming changes only at restarts.
+    in_contact = [False]
 
     def onset(t, y, v_minus):
-        return penetration(t, y) + offset[0]
+        return 1.0 if in_contact[0] else penetration(t, y)
+
+    def separation(t, y, v_minus):
+        return penetration(t, y) if in_contact[0] else 1.0
 
     def peak(t, y, v_minus):
-        if penetration(t, y) > 0.0 and penetration_rate(y) > v_minus + 1e-12:
+        if in_contact[0] and penetration_rate(y) > v_minus + 1e-12:
             return penetration_acceleration(t, y, v_minus)
-        return 1.0  # disarmed: arming happens while δ̈ > 0, so no sign change is invented
+        return 1.0
 
-    for event, direction in ((onset, 1.0), (peak, -1.0)):
+    kinds = ("onset", "peak", "separation")
+    for event, direction in ((onset, 1.0), (peak, -1.0), (separation, -1.0)):
         event.terminal = True
         event.direction = direction
 
@@ -305,7 +312,8 @@ def solve_with_onset_events(
     out = np.full((ts.size, y0.size), np.nan)
     t0, t1 = t_span
     y = np.asarray(y0, dtype=float)
-    v_minus = max(penetration_rate(y), 0.0)
+    in_contact[0] = penetration(t0, y) > 0.0
+    v_minus = max(penetration_rate(y), 0.0) if in_contact[0] else 0.0
     steps = nfev = njev = 0
     events = []
     ok, message = True, "ok"
@@ -318,7 +326,7 @@ def solve_with_onset_events(
             method=method,
             rtol=rtol,
             atol=atol,
-            events=(onset, peak),
+            events=(onset, peak, separation),
             args=(v_minus,),
             dense_output=True,
         )
@@ -334,14 +342,15 @@ def solve_with_onset_events(
             break
         if sol.status == 0:
             break
-        fired = 0 if sol.t_events[0].size else 1
+        fired = next(k for k in range(3) if sol.t_events[k].size)
         t0, y = sol.t_events[fired][0], sol.y_events[fired][0]
-        if fired == 0:
-            v_minus = max(penetration_rate(y), 0.0)
-            offset[0] = 1e-13
-        else:
+        if kinds[fired] == "onset":
+            in_contact[0], v_minus = True, max(penetration_rate(y), 0.0)
+        elif kinds[fired] == "peak":
             v_minus = max(penetration_rate(y), v_minus)
-        events.append((float(t0), ("onset", "peak")[fired], v_minus))
+        else:
+            in_contact[0], v_minus = False, 0.0
+        events.append((float(t0), kinds[fired], v_minus))
         if t0 >= t1:
             break
     else:
