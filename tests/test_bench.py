@@ -39,3 +39,59 @@ def test_quick_work_precision_run(tmp_path):
     # No silent overwrite.
     assert main(["bench", "work-precision", "slider_crank", "--quick", "--out", str(out)]) == 2
     assert os.path.exists(out / "work_precision.csv")
+
+
+def test_interrupted_run_resumes_without_repeating_finished_configurations(tmp_path, monkeypatch):
+    """Rows are written after every configuration; `--resume` keeps the saved reference and
+    the finished rows and runs only the rest. Two cheap scipy configurations against a
+    reference from the event-based numpy model stand in for the full list."""
+    import numpy as np
+
+    from jaxdeploy.benchmarks import work_precision as wp
+    from jaxdeploy.benchmarks.peers import SliderCrankNumpy
+    from jaxdeploy.benchmarks.reference import Reference
+    from jaxdeploy.scenes import SliderCrank
+
+    scene = SliderCrank()
+    p = scene.resolve_params(None)
+    s0 = scene.initial_state(p, scene.build(p))
+    ts = np.linspace(0.0, 0.3e-3, 31)
+    peer = SliderCrankNumpy(p).solve(s0, ts[-1], ts, "DOP853", 1e-10, 1e-12)
+    evidence = [dict(solver="numpy DOP853", rtol=1e-10, window=0.0, full=0.0, steps=0)]
+    reference = Reference(
+        "slider_crank", p, ts, peer.ys[:, :9], peer.ys[:, 9:], ts[-1], 1e-10, evidence
+    )
+    out = tmp_path / "bench"
+    out.mkdir()
+    reference.save(str(out))
+    configs = [
+        wp.Config(f"scipy {m} (numpy)", "rtol=1e-06", "scipy-numpy", m, 1e-6, 1e-9)
+        for m in ("DOP853", "LSODA")
+    ]
+    monkeypatch.setattr(wp, "configurations", lambda scene, quick: configs)
+    ran = []
+    run_scipy = wp._run_scipy
+    monkeypatch.setattr(
+        wp, "_run_scipy", lambda cfg, *a: ran.append(cfg.solver) or run_scipy(cfg, *a)
+    )
+    command = ["bench", "work-precision", "slider_crank", "--out", str(out), "--repeats", "1"]
+
+    assert main(command + ["--resume"]) == 0  # a reference but no row yet: runs both
+    assert ran == ["DOP853", "DOP853", "LSODA", "LSODA"]  # compiling run + one timed run
+    meta = json.loads(open(out / "work_precision.json").read())
+    first_row = meta["rows"][0]
+    assert [r["status"] for r in meta["rows"]] == ["ok", "ok"]
+    assert all(0 < r["error_window"] < 1e-2 for r in meta["rows"])
+    # Interrupt after the first configuration: only its row is on disk.
+    meta["rows"] = meta["rows"][:1]
+    open(out / "work_precision.json", "w").write(json.dumps(meta))
+    ran.clear()
+    assert main(command + ["--resume"]) == 0
+    assert ran == ["LSODA", "LSODA"]
+    rows = json.loads(open(out / "work_precision.json").read())["rows"]
+    assert [r["family"] for r in rows] == ["scipy DOP853 (numpy)", "scipy LSODA (numpy)"]
+    assert rows[0] == first_row
+    # Refusals: other options than the interrupted run's; nothing to resume; both flags.
+    assert main(command + ["--resume", "--t-end", "1e-3"]) == 2
+    assert main(["bench", "work-precision", "--out", str(tmp_path / "empty"), "--resume"]) == 2
+    assert main(command + ["--resume", "--overwrite"]) == 2

@@ -18,12 +18,15 @@ full horizon (impacts amplify small differences, so errors grow there).
 
 from __future__ import annotations
 
+import json
+import os
 from dataclasses import dataclass, field
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..io import atomic_write_json, atomic_write_npz
 from ..mechanism import RevoluteClearance
 from ..scenes import get_scene
 from ..simulation import simulate
@@ -76,6 +79,45 @@ class Reference:
         return (
             max(e["window"] for e in self.evidence),
             max(e["full"] for e in self.evidence),
+        )
+
+    def save(self, folder: str) -> None:
+        """Write `reference.npz` (ts, q, v) and `reference.json` (the rest) into `folder`,
+        atomically: a benchmark worker, or a resumed benchmark, reads them back (`load`)."""
+        atomic_write_npz(os.path.join(folder, "reference.npz"), ts=self.ts, q=self.q, v=self.v)
+        atomic_write_json(
+            os.path.join(folder, "reference.json"),
+            dict(
+                scene=self.scene,
+                params=self.params,
+                window_end=self.window_end,
+                rtol=self.rtol,
+                evidence=self.evidence,
+            ),
+        )
+
+    @classmethod
+    def load(cls, folder: str) -> Reference:
+        """The reference `save` wrote into `folder`."""
+        with open(os.path.join(folder, "reference.json"), encoding="utf-8") as f:
+            meta = json.load(f)
+        with np.load(os.path.join(folder, "reference.npz")) as arrays:
+            ts, q, v = (np.array(arrays[k]) for k in ("ts", "q", "v"))
+        return cls(
+            scene=meta["scene"],
+            params=meta["params"],
+            ts=ts,
+            q=q,
+            v=v,
+            window_end=meta["window_end"],
+            rtol=meta["rtol"],
+            evidence=meta["evidence"],
+        )
+
+    @classmethod
+    def exists_in(cls, folder: str) -> bool:
+        return all(
+            os.path.exists(os.path.join(folder, f"reference.{ext}")) for ext in ("npz", "json")
         )
 
 

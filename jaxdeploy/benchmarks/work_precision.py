@@ -2,7 +2,8 @@
 
 For each configuration: the error against the reference (relative clearance-joint
 eccentricity, over the reference window and over the full horizon; `reference.py`), wall time
-(median of `repeats` runs after a first, compiling run; compile time = first run − median),
+(median of up to `repeats` runs after a first, compiling run, fewer once the timed runs
+exceed `TIMING_BUDGET_S`; compile time = first run − median),
 steps, rejected steps, Newton iterations (generalized-α), and the process's peak resident
 memory after the configuration (a monotone, process-wide figure: it shows which configuration
 first needed more memory, not each one's own footprint).
@@ -72,7 +73,7 @@ def exudyn_configurations(scene_name: str, quick: bool) -> list[Config]:
     return [
         Config(
             f"Exudyn gen-α fixed ρ∞={rho}" + (", symbolic force" if force == "symbolic" else ""),
-            f"h={h:.0e}",
+            f"h={h:.2g}",
             "exudyn",
             "generalized_alpha",
             dt=h,
@@ -123,7 +124,7 @@ def _own_and_scipy_configurations(scene_name: str, quick: bool) -> list[Config]:
             out.append(
                 Config(
                     f"gen-α fixed ρ∞={rho}",
-                    f"h={h:.0e}",
+                    f"h={h:.2g}",
                     "jaxdeploy",
                     "generalized_alpha",
                     dt=h,
@@ -230,6 +231,28 @@ def _run_exudyn(cfg: Config, model, ts, t_end):
     return run.q, run.steps, run.rejected, run.newton_iterations, run.message
 
 
+# Repeats stop once the timed runs of one configuration add up to this many seconds: a run
+# that long is timed to well under the machine's noise by itself, and repeating the slowest
+# peers three times would double the benchmark's length for no information.
+TIMING_BUDGET_S = 60.0
+
+
+def benchmark_reference(
+    scene_name: str, *, quick: bool = False, t_end: float | None = None, n_save: int | None = None
+) -> Reference:
+    """The reference a benchmark of `scene_name` measures errors against (`reference.py`):
+    Dopri8 at rtol 1e-12 on 1201 output times over the scene's horizon (`quick`: 1e-10, 61
+    times over 0.6 ms for slider_crank, 0.1 s otherwise)."""
+    if t_end is None and quick:
+        t_end = 0.6e-3 if scene_name == "slider_crank" else 0.1
+    return reference_solution(
+        scene_name,
+        t_end=t_end,
+        n_save=n_save or (61 if quick else 1201),
+        rtol=1e-10 if quick else 1e-12,
+    )
+
+
 def run_benchmark(
     scene_name: str = "slider_crank",
     *,
@@ -238,23 +261,21 @@ def run_benchmark(
     t_end: float | None = None,
     n_save: int | None = None,
     reference: Reference | None = None,
+    done: list[Row] = (),
+    on_row=None,
     log=print,
 ) -> tuple[Reference, list[Row]]:
-    """Run every configuration of `configurations(scene_name, quick)`.
+    """Run every configuration of `configurations(scene_name, quick)` that is not in `done`
+    (rows of an interrupted run, matched by family, label and kind), calling `on_row(rows)`
+    with all rows so far after each one, so that a caller can write them before the next
+    configuration starts.
 
-    **Returns:** `(reference, rows)`.
+    **Returns:** `(reference, rows)`, rows in configuration order.
     """
     scene = get_scene(scene_name)
-    if t_end is None:
-        t_end = (0.6e-3 if scene_name == "slider_crank" else 0.1) if quick else None
     if reference is None:
         log(f"reference for {scene_name} ...")
-        reference = reference_solution(
-            scene_name,
-            t_end=t_end,
-            n_save=n_save or (61 if quick else 1201),
-            rtol=1e-10 if quick else 1e-12,
-        )
+        reference = benchmark_reference(scene_name, quick=quick, t_end=t_end, n_save=n_save)
         log(f"  evidence: {reference.evidence}")
     params = reference.params
     mech = scene.build(params)
@@ -262,6 +283,7 @@ def run_benchmark(
     ts = reference.ts
     t_end = float(ts[-1])
     models = {}
+    finished = {(r.family, r.label, r.kind): r for r in done}
     rows = []
     if scene_name == "slider_crank":
         from .exudyn_peer import ExudynUnavailable, exudyn_version
@@ -270,7 +292,12 @@ def run_benchmark(
             log(f"Exudyn {exudyn_version()}: its generalized-α runs as a peer")
         except ExudynUnavailable as err:
             log(f"  {err}")
-    for cfg in configurations(scene_name, quick):
+    todo = configurations(scene_name, quick)
+    for number, cfg in enumerate(todo, 1):
+        if (cfg.family, cfg.label, cfg.kind) in finished:
+            rows.append(finished[(cfg.family, cfg.label, cfg.kind)])
+            log(f"  [{number}/{len(todo)}] {cfg.family} {cfg.label}: done in an earlier run")
+            continue
         if cfg.kind == "jaxdeploy":
 
             def call(cfg=cfg):
@@ -311,17 +338,21 @@ def run_benchmark(
             def call(cfg=cfg, model=models[cfg.kind], y0=y0):
                 return _run_scipy(cfg, model, y0, ts, t_end)
 
+        compiled = cfg.kind not in ("scipy-numpy", "exudyn")
         start = time.perf_counter()
         q, steps, rejected, newton, status = call()
         first = time.perf_counter() - start
         walls = []
-        for _ in range(repeats):
+        # Paths without compilation need no second run when the first alone used the budget.
+        while len(walls) < repeats and sum(walls) < TIMING_BUDGET_S:
+            if not walls and not compiled and first >= TIMING_BUDGET_S:
+                break
             start = time.perf_counter()
             call()
             walls.append(time.perf_counter() - start)
         wall = float(np.median(walls)) if walls else first
         # Compile time is meaningful for the jitted paths only (scipy-jitted: the RHS).
-        compile_s = max(first - wall, 0.0) if cfg.kind not in ("scipy-numpy", "exudyn") else 0.0
+        compile_s = max(first - wall, 0.0) if compiled else 0.0
         window, full = eccentricity_error(mech, q, reference.q, ts, reference.window_end)
         row = Row(
             cfg.family,
@@ -338,10 +369,13 @@ def run_benchmark(
             status,
         )
         log(
-            f"  {cfg.family:34s} {cfg.label:11s} err {window:9.2e} / {full:9.2e}  "
-            f"wall {wall:8.3f}s compile {compile_s:6.1f}s steps {steps} rej {rejected} {status}"
+            f"  [{number}/{len(todo)}] {cfg.family:34s} {cfg.label:11s} err {window:9.2e} / "
+            f"{full:9.2e}  wall {wall:8.3f}s compile {compile_s:6.1f}s steps {steps} "
+            f"rej {rejected} {status}"
         )
         rows.append(row)
+        if on_row is not None:
+            on_row(rows)
     return reference, rows
 
 

@@ -19,11 +19,14 @@ def add_arguments(parser) -> None:
     wp.add_argument("--repeats", type=int, default=3, help="timed runs per configuration")
     wp.add_argument("--t-end", type=float, default=None, help="horizon [s] (default: scene's)")
     wp.add_argument("--overwrite", action="store_true", help="replace an existing result")
+    wp.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue an interrupted run in --out: keep its reference and finished rows",
+    )
 
 
 def run(args) -> int:
-    from ..benchmarks.report import write_report
-    from ..benchmarks.work_precision import run_benchmark
     from ..io import prepare_output_dir
 
     if args.scene not in SCENES:
@@ -37,22 +40,67 @@ def run(args) -> int:
     if args.t_end is not None and not args.t_end > 0:
         print(f"error: --t-end = {args.t_end} is invalid: it must be > 0 (s)", file=sys.stderr)
         return 2
+    if args.resume and args.overwrite:
+        print("error: --resume and --overwrite exclude each other", file=sys.stderr)
+        return 2
     out = args.out or f"results/bench_{args.scene}"
+    repeats = 1 if args.quick else args.repeats
+    options = dict(quick=args.quick, repeats=repeats, t_end=args.t_end)
     try:
-        prepare_output_dir(out, args.overwrite)
-    except FileExistsError as err:
+        reference, done = _resume(out, args.scene, options) if args.resume else (None, [])
+        if not args.resume:
+            prepare_output_dir(out, args.overwrite)
+    except (FileExistsError, FileNotFoundError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    repeats = 1 if args.quick else args.repeats
-    reference, rows = run_benchmark(args.scene, quick=args.quick, repeats=repeats, t_end=args.t_end)
     from ..benchmarks.exudyn_peer import exudyn_available, exudyn_version
+    from ..benchmarks.report import write_report
+    from ..benchmarks.work_precision import benchmark_reference, run_benchmark
 
-    options = dict(
+    options["exudyn"] = exudyn_version() if exudyn_available() else None
+    if reference is None:
+        print(f"reference for {args.scene} ...", flush=True)
+        reference = benchmark_reference(args.scene, quick=args.quick, t_end=args.t_end)
+        reference.save(out)
+        print(f"  evidence: {reference.evidence}", flush=True)
+
+    def write(rows):  # after every configuration: an interrupted run loses at most one
+        write_report(out, args.scene, reference, rows, options)
+
+    reference, rows = run_benchmark(
+        args.scene,
         quick=args.quick,
         repeats=repeats,
-        t_end=args.t_end,
-        exudyn=exudyn_version() if exudyn_available() else None,
+        reference=reference,
+        done=done,
+        on_row=write,
+        log=lambda message: print(message, flush=True),
     )
     files = write_report(out, args.scene, reference, rows, options)
     print("wrote " + ", ".join(files))
     return 0
+
+
+def _resume(out: str, scene: str, options: dict):
+    """The reference and finished rows of an interrupted run in `out`, after checking that it
+    benchmarked the same scene with the same options."""
+    import json
+    import os
+
+    from ..benchmarks.reference import Reference
+    from ..benchmarks.work_precision import Row
+
+    if not Reference.exists_in(out):
+        raise FileNotFoundError(f"--resume: no benchmark reference in {out!r} to continue from")
+    reference = Reference.load(out)
+    if reference.scene != scene:
+        raise ValueError(f"--resume: {out!r} holds a {reference.scene} benchmark, not {scene}")
+    meta_path = os.path.join(out, "work_precision.json")
+    if not os.path.exists(meta_path):
+        return reference, []  # interrupted before the first configuration finished
+    with open(meta_path, encoding="utf-8") as f:
+        meta = json.load(f)
+    earlier = {k: meta["options"].get(k) for k in options}
+    if earlier != options:
+        raise ValueError(f"--resume: {out!r} was run with {earlier}, not {options}")
+    return reference, [Row(**row) for row in meta["rows"]]
