@@ -80,11 +80,13 @@ class Reference:
 
     @property
     def error_bound(self) -> tuple[float, float]:
-        """Largest evidence difference (window, full): an upper estimate of the reference's own
-        error in relative eccentricity."""
+        """(window, full): the smallest difference to a check run. Each difference bounds the
+        sum of the two runs' errors (barring cancellation between independent runs), so the
+        smallest one bounds the reference's own error; larger ones are mostly the looser
+        checks' errors."""
         return (
-            max(e["window"] for e in self.evidence),
-            max(e["full"] for e in self.evidence),
+            min(e["window"] for e in self.evidence),
+            min(e["full"] for e in self.evidence),
         )
 
     def save(self, folder: str) -> None:
