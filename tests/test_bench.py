@@ -95,3 +95,23 @@ def test_interrupted_run_resumes_without_repeating_finished_configurations(tmp_p
     assert main(command + ["--resume", "--t-end", "1e-3"]) == 2
     assert main(["bench", "work-precision", "--out", str(tmp_path / "empty"), "--resume"]) == 2
     assert main(command + ["--resume", "--overwrite"]) == 2
+
+
+def test_fastest_per_error_level_compares_ours_with_the_fastest_peer_that_reaches_it():
+    from jaxdeploy.benchmarks.report import fastest_per_error_level
+    from jaxdeploy.benchmarks.work_precision import Row
+
+    def row(family, kind, error, wall, status="ok"):
+        return Row(family, "x", kind, error, error, wall, 0.0, 1, 0, 0, 1.0, status)
+
+    rows = [
+        row("ours fast", "jaxdeploy", 5e-4, 0.1),
+        row("ours exact", "jaxdeploy", 5e-7, 2.0),
+        row("peer", "scipy-numpy", 5e-5, 1.0),
+        row("peer failed", "scipy-numpy", 1e-9, 0.01, status="failed"),
+    ]
+    table = fastest_per_error_level(rows, levels=(1e-3, 1e-4, 1e-6, 1e-8)).splitlines()
+    assert table[2] == "| 1e-03 | ours fast x | 0.1 | peer x | 1 | 0.1 |"
+    assert table[3] == "| 1e-04 | ours exact x | 2 | peer x | 1 | 2 |"
+    assert table[4] == "| 1e-06 | ours exact x | 2 | none reaches it | – | – |"
+    assert table[5] == "| 1e-08 | none reaches it | – | none reaches it | – | – |"

@@ -51,6 +51,43 @@ def markdown_table(rows: list[Row]) -> str:
     return header + "\n".join(lines) + "\n"
 
 
+ERROR_LEVELS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
+
+
+def fastest_per_error_level(rows: list[Row], levels=ERROR_LEVELS) -> str:
+    """Markdown: for each error level (over the reference window), the fastest jaxdeploy
+    configuration and the fastest peer (scipy, Exudyn) reaching it, and their wall-time
+    ratio (issue 5's target: ≤ 1 at every level from 1e-3 to 1e-8)."""
+
+    def fastest(level, ours):
+        reach = [
+            r
+            for r in rows
+            if r.status == "ok" and r.error_window <= level and (r.kind == "jaxdeploy") == ours
+        ]
+        return min(reach, key=lambda r: r.wall_s) if reach else None
+
+    lines = [
+        "| error level | fastest jaxdeploy | wall [s] | fastest peer | wall [s] | ours / peer |",
+        "|---|---|---|---|---|---|",
+    ]
+    for level in levels:
+        ours, peer = fastest(level, True), fastest(level, False)
+        cells = []
+        for r in (ours, peer):
+            cells += (
+                ["none reaches it", "–"]
+                if r is None
+                else [
+                    f"{r.family} {r.label}",
+                    f"{r.wall_s:.3g}",
+                ]
+            )
+        ratio = "–" if ours is None or peer is None else f"{ours.wall_s / peer.wall_s:.2g}"
+        lines.append(f"| {level:.0e} | " + " | ".join(cells) + f" | {ratio} |")
+    return "\n".join(lines) + "\n"
+
+
 def plot(rows: list[Row], path: str, title: str) -> None:
     import matplotlib
 
@@ -115,6 +152,8 @@ def write_report(out_dir: str, scene: str, reference, rows: list[Row], options: 
         f"Machine: {machine.get('Model name', '?')}, {machine.get('CPU(s)', '?')} CPUs, "
         f"load average {machine['load_average_1_5_15min'][0]:.1f} at the end of the run.\n\n"
         + markdown_table(rows)
+        + "\nFastest configuration reaching each error level over the window (wall time "
+        "per run, compilation excluded):\n\n" + fastest_per_error_level(rows)
     )
     atomic_write_bytes(paths["md"], md.encode())
     plot(rows, paths["png"], f"work–precision, {scene}")
