@@ -8,6 +8,8 @@ import os
 import platform
 import subprocess
 
+import numpy as np
+
 from ..io import atomic_write_bytes, atomic_write_json, run_metadata
 from .work_precision import Row, rows_as_dicts
 
@@ -94,8 +96,9 @@ def plot(rows: list[Row], path: str, title: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), sharey=True)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 7), sharey=True)
     families = list(dict.fromkeys(r.family for r in rows))
+    colors = plt.cm.tab20(np.linspace(0.0, 1.0, 20))  # 10 default colours repeat here
     markers = "os^vD<>ph*xP"
     for i, family in enumerate(families):
         sel = [r for r in rows if r.family == family and r.status == "ok"]
@@ -110,6 +113,7 @@ def plot(rows: list[Row], path: str, title: str) -> None:
                 marker=markers[i % len(markers)],
                 label=family,
                 ms=5,
+                color=colors[i % len(colors)],
             )
     axes[0].set_xlabel("error over the reference window (max |e − e_ref| / c)")
     axes[1].set_xlabel("error over the full horizon")
@@ -117,9 +121,9 @@ def plot(rows: list[Row], path: str, title: str) -> None:
     for ax in axes:
         ax.grid(alpha=0.3, which="both")
         ax.invert_xaxis()
-    axes[1].legend(fontsize=7, loc="best")
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", ncol=4, fontsize=7)
     fig.suptitle(title)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.16, 1, 1))
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=120)
     plt.close(fig)
