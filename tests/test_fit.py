@@ -12,6 +12,7 @@ import pytest
 from jaxdeploy.cli import main
 from jaxdeploy.fit import (
     FitParameter,
+    FitResult,
     MeasurementError,
     Measurements,
     ResidualSpec,
@@ -82,7 +83,7 @@ def test_covariance_is_the_linear_least_squares_closed_form():
 
     z0 = np.array([p.to_internal(p.guess) for p in params])
     z, r, jac, _, info = levenberg_marquardt(model, z0, max_iterations=100, ftol=1e-14)
-    theta, se, corr, cov, _, _ = _curvature(params, z, r, jac, noise_known=True)
+    theta, se, corr, cov, *_ = _curvature(params, z, r, jac, noise_known=True)
     np.testing.assert_allclose(theta, np.linalg.lstsq(x, y, rcond=None)[0], rtol=1e-7)
     expected = sigma**2 * np.linalg.inv(x.T @ x)
     np.testing.assert_allclose(cov, expected, rtol=1e-6)
@@ -108,6 +109,9 @@ def test_a_parameter_the_motion_does_not_depend_on_is_reported_not_identified():
         not math.isfinite(result.standard_errors["mass"]) or result.relative_errors()["mass"] > 10
     )
     assert result.report()["noise"] == "estimated from the residuals"
+    # Its correlation with the length is undefined (NaN), not a confounded pair.
+    assert math.isnan(result.correlation[0, 1]) and result.confounded_pairs() == []
+    assert result.flags() == ["mass is not identified (std. error > 50% of the value)"]
 
 
 def test_block_residuals_average_in_noise_units():
@@ -239,3 +243,45 @@ def test_a_parameter_driven_onto_its_bound_gets_an_infinite_error_not_a_crash():
     theta, se, *_ = _curvature(params, z, r, jac, noise_known=True)
     assert theta[0] == pytest.approx(1.5) and params[0].dphysical_dz(z[0]) == 0.0
     assert se[0] == np.inf and np.isfinite(se[1])
+    result = _result_from_curvature(params, z, r, jac)
+    assert result.at_bound == ["a"] and result.confounded_pairs() == []
+    assert result.unresolved_combinations() == []
+    assert result.flags() == ["a is at its bound (the data push it beyond)"]
+
+
+def _result_from_curvature(params, z, r, jac):
+    theta, se, corr, cov, s, chi2, details = _curvature(params, z, r, jac, noise_known=True)
+    names = [p.name for p in params]
+    return FitResult(
+        parameters=params, estimates=dict(zip(names, theta, strict=True)),
+        standard_errors=dict(zip(names, se, strict=True)),
+        correlation=corr, covariance=cov, singular_values=s, chi2=chi2, n_residuals=r.size,
+        noise_known=True, iterations=0, evaluations=0, converged=True, message="",
+        history=[], wall_time=0.0, comparison=None, model_initial={}, model_final={}, **details,
+    )  # fmt: skip
+
+
+def test_a_product_of_two_parameters_is_reported_as_the_unresolved_combination():
+    """y = a b x (only the product is seen; like E and ν in E*): both get infinite errors,
+    their NaN correlation is not reported as a confounded pair, and the report names the
+    unseen direction ln a − ln b (unit vector ±(1, −1)/√2) with the third parameter, which
+    is determined, left out of it."""
+    x = np.linspace(0, 1, 30)
+    params = [FitParameter("a", 1.0, 0.1, 10.0), FitParameter("b", 2.0, 0.1, 10.0),
+              FitParameter("c", 0.5, -2.0, 2.0)]  # fmt: skip
+    theta = np.array([1.5, 3.0, 0.3])
+    z = np.array([p.to_internal(v) for p, v in zip(params, theta, strict=True)])
+    dtheta = np.array([p.dphysical_dz(zk) for p, zk in zip(params, z, strict=True)])
+    jac = np.column_stack([theta[1] * x, theta[0] * x, np.ones_like(x)]) * dtheta / 0.01
+    r = 0.01 * np.sin(np.arange(30.0))
+    result = _result_from_curvature(params, z, r, jac)
+    assert np.isinf(result.standard_errors["a"]) and np.isinf(result.standard_errors["b"])
+    assert np.isfinite(result.standard_errors["c"])
+    assert result.confounded_pairs() == [] and result.at_bound == []
+    (combo,) = result.unresolved_combinations()
+    assert set(combo) == {"a", "b"}
+    assert abs(combo["a"]) == pytest.approx(2**-0.5) and combo["a"] == pytest.approx(-combo["b"])
+    flags = result.flags()
+    assert flags[:2] == [f"{n} is not identified (std. error > 50% of the value)" for n in "ab"]
+    assert flags[2].startswith("only a combination is unresolved") and len(flags) == 3
+    assert "nan" not in json.dumps(result.report()["confounded_pairs"]).lower()

@@ -296,12 +296,7 @@ def run(args) -> int:
         f"chi2/dof = {result.reduced_chi2:.3g} ({result.n_residuals} residuals, noise "
         f"{report['noise']}); {result.iterations} LM trial steps; {result.message}"
     )
-    for n in result.not_identified():
-        print(
-            f"warning: {n} is not identified by these channels (std. error > "
-            f"{50:.0f} % of the value)"
-        )
-    for a, b, c in result.confounded_pairs():
-        print(f"warning: {a} and {b} are confounded (correlation {c:+.3f})")
+    for flag in result.flags():
+        print(f"warning: {flag}")
     print(f"wrote {args.out}/fit.json, history.csv, fit.npz, " + ", ".join(figures))
     return 0 if result.converged else 1

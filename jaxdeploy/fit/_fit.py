@@ -71,6 +71,11 @@ class FitResult:
     model_initial: dict[str, np.ndarray]
     model_final: dict[str, np.ndarray]
     stages: list[dict] = field(default_factory=list)
+    # Parameters whose bounded map saturated (dθ/dz = 0: the fit drove them onto a bound),
+    # and the directions of parameter space (unit vectors in ln θ, `{name: component}`) the
+    # curvature does not see at all (singular values at roundoff level).
+    at_bound: list[str] = field(default_factory=list)
+    unresolved: list[dict[str, float]] = field(default_factory=list)
 
     @property
     def names(self) -> list[str]:
@@ -88,12 +93,50 @@ class FitResult:
         return [n for n, r in self.relative_errors().items() if not r <= NOT_IDENTIFIED]
 
     def confounded_pairs(self) -> list[tuple[str, str, float]]:
+        """Pairs with a finite correlation beyond ±`CORRELATED`. A correlation is NaN when
+        one of the two has an infinite standard error (at a bound, or along a direction the
+        data do not see): such pairs are not counted here; `unresolved_combinations` says
+        which parameters share an unseen direction."""
         out = []
         for i, a in enumerate(self.names):
             for j in range(i + 1, len(self.names)):
                 c = float(self.correlation[i, j])
-                if not abs(c) <= CORRELATED:
+                if math.isfinite(c) and abs(c) > CORRELATED:
                     out.append((a, self.names[j], c))
+        return out
+
+    def unresolved_combinations(self, threshold: float = 0.05) -> list[dict[str, float]]:
+        """The unseen directions that mix two or more parameters not at a bound (components
+        of the unit vector in ln θ above `threshold`): the data fix every combination of
+        these parameters except this one (e.g. E and ν, seen only through E/(1 − ν²))."""
+        out = []
+        for direction in self.unresolved:
+            kept = {
+                n: c for n, c in direction.items() if abs(c) > threshold and n not in self.at_bound
+            }
+            if len(kept) >= 2:
+                out.append(kept)
+        return out
+
+    def flags(self) -> list[str]:
+        """One sentence per problem the curvature shows (empty: every parameter is
+        determined and no pair is confounded)."""
+        out = [f"{n} is at its bound (the data push it beyond)" for n in self.at_bound]
+        out += [
+            f"{n} is not identified (std. error > {NOT_IDENTIFIED:.0%} of the value)"
+            for n in self.not_identified()
+            if n not in self.at_bound
+        ]
+        out += [
+            f"{a} and {b} are confounded (correlation {c:+.3f})"
+            for a, b, c in self.confounded_pairs()
+        ]
+        out += [
+            "only a combination is unresolved: "
+            + " ".join(f"{c:+.3f}·ln {n}" for n, c in combo.items())
+            + " is not seen by the data"
+            for combo in self.unresolved_combinations()
+        ]
         return out
 
     def report(self) -> dict:
@@ -111,6 +154,10 @@ class FitResult:
             "singular_values_relative_jacobian": list(map(float, self.singular_values)),
             "not_identified": self.not_identified(),
             "confounded_pairs": [list(x) for x in self.confounded_pairs()],
+            "at_bound": self.at_bound,
+            "unresolved_directions": self.unresolved,
+            "unresolved_combinations": self.unresolved_combinations(),
+            "flags": self.flags(),
             "chi2": self.chi2,
             "n_residuals": self.n_residuals,
             "reduced_chi2": self.reduced_chi2,
@@ -307,7 +354,13 @@ def _curvature(parameters, z, r, jac, noise_known):
         corr = cov / np.outer(se, se)
     corr = np.where(np.isfinite(corr), corr, np.nan)
     np.fill_diagonal(corr, 1.0)
-    return theta, se, corr, cov, s, chi2
+    names = [p.name for p in parameters]
+    unresolved = [
+        {n: float(c) for n, c in zip(names, row, strict=True) if abs(c) > 1e-6} for row in vt[~seen]
+    ]
+    details = dict(at_bound=[n for n, b in zip(names, at_bound, strict=True) if b],
+                   unresolved=unresolved)  # fmt: skip
+    return theta, se, corr, cov, s, chi2, details
 
 
 def fit(
@@ -411,7 +464,7 @@ def fit(
                 cost=0.5 * float(r @ r),
             )
         )
-    theta, se, corr, cov, s, chi2 = _curvature(params, z, r, jac, comparison.noise_known)
+    theta, se, corr, cov, s, chi2, details = _curvature(params, z, r, jac, comparison.noise_known)
     names = [p.name for p in params]
     return FitResult(
         parameters=params,
@@ -433,4 +486,5 @@ def fit(
         model_initial=model_initial,
         model_final=aux,
         stages=stages,
+        **details,
     )
