@@ -285,3 +285,72 @@ def test_a_product_of_two_parameters_is_reported_as_the_unresolved_combination()
     assert flags[:2] == [f"{n} is not identified (std. error > 50% of the value)" for n in "ab"]
     assert flags[2].startswith("only a combination is unresolved") and len(flags) == 3
     assert "nan" not in json.dumps(result.report()["confounded_pairs"]).lower()
+
+
+def test_smooth_residuals_are_in_noise_units_and_see_a_shifted_spike_that_blocks_miss():
+    """Gaussian-smoothed residuals of pure white noise have unit variance (the scale
+    σ √(Σ w²) is right); and for a spike 10 samples wide shifted by δ, the block loss is flat
+    in δ while the spike stays inside one block (no gradient to follow), whereas the smoothed
+    loss grows strictly with δ over the kernel width."""
+    rng = np.random.default_rng(4)
+    t = np.linspace(0.0, 1.0, 20001)
+    noise = Measurements(t, {"y": rng.standard_normal(t.size)}, {"y": 1.0})
+    smooth = Comparison(noise, ResidualSpec("smooth", width=0.004))
+    r = smooth.residuals_np({"y": np.zeros_like(t)})
+    assert r.size == smooth.size > 200
+    assert np.mean(r**2) == pytest.approx(1.0, abs=0.15)
+
+    def spike(t0):
+        return np.exp(-0.5 * ((t - t0) / 2.5e-4) ** 2)
+
+    data = Measurements(t, {"y": spike(0.5125)}, {"y": 0.01})
+    block = Comparison(data, ResidualSpec("block", block=0.025))  # spike inside [0.5, 0.525)
+    smooth = Comparison(data, ResidualSpec("smooth", width=0.02))
+    shifts = np.linspace(0.0, 0.008, 9)
+    block_loss = [np.sum(block.residuals_np({"y": spike(0.5125 + d)}) ** 2) for d in shifts]
+    smooth_loss = [np.sum(smooth.residuals_np({"y": spike(0.5125 + d)}) ** 2) for d in shifts]
+    assert np.all(np.diff(smooth_loss) > 0) and smooth_loss[-1] > 100
+    assert max(block_loss) < 1e-12 * smooth_loss[-1]  # flat: the block cannot tell
+
+
+@pytest.mark.parametrize("kind", ["trajectory", "block", "smooth"])
+def test_residual_jacobian_is_the_residual_map_applied_to_the_channel_jacobian(kind):
+    """Residuals are linear in the channel samples: the numpy Jacobian from the channels'
+    Jacobian equals jax.jacfwd of the (JAX) residual function."""
+    import jax
+
+    t = np.linspace(0.0, 1.0, 101)
+    rng = np.random.default_rng(1)
+    data = Measurements(t, {"a": rng.standard_normal(101), "b": t}, {"a": 0.3, "b": 0.1})
+    spec = ResidualSpec(kind, windows=((0.1, 0.8),), block=0.1, width=0.1)
+    cmp_ = Comparison(data, spec)
+    base = {n: rng.standard_normal(cmp_.n_save) for n in "ab"}
+    dir_ = {n: rng.standard_normal((cmp_.n_save, 3)) for n in "ab"}
+
+    def residuals(z):
+        return cmp_.residuals({n: base[n] + dir_[n] @ z for n in "ab"})
+
+    expected = np.asarray(jax.jacfwd(residuals)(np.zeros(3)))
+    np.testing.assert_allclose(cmp_.residual_jacobian(dir_), expected, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        cmp_.residuals_np(base), np.asarray(residuals(np.zeros(3))), rtol=1e-12
+    )
+
+
+def test_widths_give_smooth_stages_ending_with_independent_residuals():
+    from argparse import Namespace
+
+    from jaxdeploy.commands.fit import _stages
+
+    data = Measurements(np.linspace(0, 0.1, 11), {"y": np.ones(11)}, {"y": 1.0})
+    args = Namespace(window=[], loss="trajectory", block=None, width=None,
+                     widths="0.004,0.001", horizons="0.05,0.1")  # fmt: skip
+    stages = _stages(args, data)
+    assert [(s.kind, s.width, s.windows[0][1]) for s in stages] == [
+        ("smooth", 0.004, 0.05), ("smooth", 0.001, 0.05), ("trajectory", None, 0.05),
+        ("smooth", 0.004, 0.1), ("smooth", 0.001, 0.1), ("trajectory", None, 0.1),
+    ]  # fmt: skip
+    for bad, message in [(dict(widths="0.001,0.004"), "decrease"),
+                         (dict(loss="smooth", width=0.01), "independent residuals")]:  # fmt: skip
+        with pytest.raises(ValueError, match=message):
+            _stages(Namespace(**{**vars(args), **bad}), data)

@@ -50,11 +50,20 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument(
         "--loss",
-        choices=("trajectory", "block"),
+        choices=("trajectory", "block", "smooth"),
         default="trajectory",
-        help="pointwise residuals or block means (a low-pass feature)",
+        help="pointwise residuals, block means (a low-pass feature) or Gaussian-smoothed "
+        "channels (--width)",
     )
     parser.add_argument("--block", type=float, default=None, help="block duration [s]")
+    parser.add_argument("--width", type=float, default=None, help="smoothing width [s]")
+    parser.add_argument(
+        "--widths",
+        default=None,
+        metavar="W1,W2,...",
+        help="continuation in resolution: fit the channels smoothed over W1 s, then W2, ... "
+        "(decreasing), then with --loss (trajectory or block; the uncertainties come from it)",
+    )
     parser.add_argument(
         "--window",
         action="append",
@@ -97,12 +106,18 @@ def _fail(message: str) -> int:
 
 
 def _pairs(items, what):
+    """KEY=VALUE items; a VALUE that parses as JSON (e.g. `{"J1": "panel1"}`) is decoded."""
+    import json
+
     out = {}
     for item in items:
         if "=" not in item:
             raise ValueError(f"{what} expects KEY=VALUE, got {item!r}")
         key, value = (s.strip() for s in item.split("=", 1))
-        out[key] = value
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
     return out
 
 
@@ -123,8 +138,31 @@ def _stages(args, data):
 
     windows = _windows(args.window)
     block = args.block if args.loss == "block" else None
+    width = args.width if args.loss == "smooth" else None
+    widths = []
+    if args.widths:
+        try:
+            widths = [float(w) for w in args.widths.split(",")]
+        except ValueError:
+            raise ValueError(
+                f"--widths {args.widths!r}: expected widths in s, e.g. 0.004,0.001"
+            ) from None
+        if args.loss == "smooth":
+            raise ValueError(
+                "--widths ends with a stage of independent residuals: give --loss trajectory "
+                "or --loss block with it"
+            )
+        if not all(w > 0 for w in widths) or any(
+            b >= a for a, b in zip(widths, widths[1:], strict=False)
+        ):
+            raise ValueError(f"--widths {args.widths!r}: widths must be > 0 and decrease")
+
+    def stages_up_to(wins):
+        out = [ResidualSpec("smooth", wins, width=w) for w in widths]
+        return out + [ResidualSpec(args.loss, wins, block, width)]
+
     if not args.horizons:
-        return [ResidualSpec(args.loss, windows, block)]
+        return stages_up_to(windows)
     try:
         horizons = [float(h) for h in args.horizons.split(",")]
     except ValueError:
@@ -138,7 +176,7 @@ def _stages(args, data):
     base = windows or ((float(data.t[0]), float(data.t[-1])),)
     for h in horizons:
         clipped = tuple((a, min(b, h)) for a, b in base if a < h)
-        stages.append(ResidualSpec(args.loss, clipped, block))
+        stages += stages_up_to(clipped)
     return stages
 
 
@@ -159,8 +197,6 @@ def _progress(names):
 def run(args) -> int:
     import os
     import time
-
-    import numpy as np
 
     from ..fit import MeasurementError, fit, load_measurements, make_parameters
     from ..fit._plots import plot_fit
@@ -275,11 +311,12 @@ def run(args) -> int:
         )
     atomic_write_bytes(f"{args.out}/history.csv", ("\n".join(rows) + "\n").encode())
     cmp_ = result.comparison
-    arrays = {"t": cmp_.times}
+    first = result.comparison_initial
+    arrays = {"t": cmp_.times, "t_initial": first.times}
     for n in cmp_.names:
         arrays[f"data_{n}"] = cmp_.data_features[n]
-        arrays[f"initial_{n}"] = np.asarray(cmp_.features(result.model_initial[n]))
-        arrays[f"fitted_{n}"] = np.asarray(cmp_.features(result.model_final[n]))
+        arrays[f"initial_{n}"] = first.features_np(result.model_initial[n])
+        arrays[f"fitted_{n}"] = cmp_.features_np(result.model_final[n])
     atomic_write_npz(f"{args.out}/fit.npz", **arrays)
     figures = plot_fit(result, args.out)
     atomic_write_json(f"{args.out}/fit.json", report)

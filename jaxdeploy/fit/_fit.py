@@ -71,6 +71,8 @@ class FitResult:
     model_initial: dict[str, np.ndarray]
     model_final: dict[str, np.ndarray]
     stages: list[dict] = field(default_factory=list)
+    # The first stage's comparison: `model_initial` holds the channels at its save times.
+    comparison_initial: Comparison | None = None
     # Parameters whose bounded map saturated (dθ/dz = 0: the fit drove them onto a bound),
     # and the directions of parameter space (unit vectors in ln θ, `{name: component}`) the
     # curvature does not see at all (singular values at roundoff level).
@@ -172,10 +174,16 @@ class FitResult:
 
 
 class Model:
-    """The compiled map z → (residuals, Jacobian, model channels, solver status) for one scene,
-    one parameter set to fit and one `Comparison`."""
+    """The compiled map z → (model channels at the save times `ts`, their Jacobian d/dz,
+    solver status) for one scene, one parameter set to fit and one set of save times.
 
-    def __init__(self, scene, parameters, fixed, comparison, control, simulate_options):
+    Residuals are linear maps of the channel samples (samples, block means, kernel averages:
+    `Comparison`), so their Jacobian is the same map applied to the channels' Jacobian. One
+    compiled model therefore serves every residual stage with the same save times (e.g.
+    continuation in the smoothing width), without recompiling.
+    """
+
+    def __init__(self, scene, parameters, fixed, names, ts, control, simulate_options):
         import diffrax as dfx
         import jax
         import jax.numpy as jnp
@@ -183,7 +191,8 @@ class Model:
         from ..batch import run_scene, step_control
         from ._derivatives import _adaptive
 
-        names = list(comparison.names)
+        names = list(names)
+        ts = np.asarray(ts, dtype=float)
         if _adaptive(step_control(scene, control)):
             # Adaptive steps: differentiate the run over its own accepted steps (see
             # `simulate(..., replay_steps=True)`), not a loop that re-decides them.
@@ -196,36 +205,60 @@ class Model:
             traj = run_scene(
                 scene,
                 params,
-                comparison.t_end,
-                ts=jnp.asarray(comparison.ts),
+                float(ts[-1]),
+                ts=jnp.asarray(ts),
                 control=control,
                 adjoint=dfx.ForwardMode(),
                 **simulate_options,
             )
             model = scene.select_channels(scene.build(params), traj, names)
-            r = comparison.residuals(model)
-            return r, (r, model, traj.result == dfx.RESULTS.successful)
+            ok = traj.result == dfx.RESULTS.successful
+            return model, (model, ok)
 
         self._jac = jax.jit(jax.jacfwd(evaluate, has_aux=True))
+        self._batch = jax.jit(jax.vmap(lambda z: evaluate(z)[1]))
 
-        def cost(z):
-            r, (_, _, ok) = evaluate(z)
-            return 0.5 * jnp.sum(r * r), ok
+    def channels_batch(self, zs):
+        """Channels of many points `zs` (k, p) as one vmapped batch: `({name: (k, n)}, ok)`."""
+        model, ok = self._batch(np.asarray(zs, dtype=float))
+        return {n: np.asarray(v) for n, v in model.items()}, np.asarray(ok)
 
-        self._costs = jax.jit(jax.vmap(cost))
+    def __call__(self, z):
+        """`(channels, d channels/dz, ok)` at `z`: `{name: (n,)}`, `{name: (n, p)}`."""
+        jac, (model, ok) = self._jac(np.asarray(z, dtype=float))
+        model = {n: np.asarray(v) for n, v in model.items()}
+        jac = {n: np.asarray(v) for n, v in jac.items()}
+        ok = bool(ok) and all(np.all(np.isfinite(v)) for v in (*model.values(), *jac.values()))
+        return model, jac, ok
+
+
+class StageModel:
+    """`z → (r, J, channels, ok)` for LM: a compiled `Model` and one `Comparison`."""
+
+    def __init__(self, model: Model, comparison: Comparison):
+        self.model, self.comparison = model, comparison
 
     def costs(self, zs):
         """Costs ½|r|² of many points `zs` (k, p) as one vmapped batch; inf where the
         simulation failed or gave non-finite residuals."""
-        cost, ok = self._costs(np.asarray(zs, dtype=float))
-        cost = np.asarray(cost)
-        return np.where(np.asarray(ok) & np.isfinite(cost), cost, np.inf)
+        channels, ok = self.model.channels_batch(zs)
+        cost = np.array(
+            [
+                0.5 * float(np.sum(r * r))
+                for r in (
+                    self.comparison.residuals_np({n: v[i] for n, v in channels.items()})
+                    for i in range(len(ok))
+                )
+            ]
+        )
+        return np.where(ok & np.isfinite(cost), cost, np.inf)
 
     def __call__(self, z):
-        jac, (r, model, ok) = self._jac(np.asarray(z, dtype=float))
-        r = np.asarray(r)
-        ok = bool(ok) and bool(np.all(np.isfinite(r))) and bool(np.all(np.isfinite(jac)))
-        return r, np.asarray(jac), {n: np.asarray(v) for n, v in model.items()}, ok
+        channels, jac, ok = self.model(z)
+        r = self.comparison.residuals_np(channels)
+        jr = self.comparison.residual_jacobian(jac)
+        ok = ok and bool(np.all(np.isfinite(r))) and bool(np.all(np.isfinite(jr)))
+        return r, jr, channels, ok
 
 
 def latin_hypercube_starts(parameters, n: int, seed: int) -> np.ndarray:
@@ -245,6 +278,7 @@ def levenberg_marquardt(
     *,
     max_iterations: int = 30,
     ftol: float = 1e-8,
+    ctol: float = 0.0,
     xtol: float = 1e-8,
     gtol: float = 1e-10,
     tau: float = 1e-3,
@@ -253,7 +287,9 @@ def levenberg_marquardt(
     """Minimise ½|r(z)|² with `model(z) -> (r, J, aux, ok)` (Madsen et al. 2004, Alg. 3.16,
     Marquardt scaling `D = diag(JᵀJ)`).
 
-    Stops when an accepted step lowers the cost by less than `ftol` relative, when the step
+    Stops when an accepted step lowers the cost by less than `ftol` relative or by less than
+    `ctol` absolute (residuals in noise units: a change of ½ in the cost is one standard
+    error, so a decrease far below that is statistically irrelevant), when the step
     is below `xtol (|z| + xtol)`, when `|Jᵀr|_∞ ≤ gtol`, or after `max_iterations` trial
     steps. **Returns:** `(z, r, J, aux, info)`.
     """
@@ -291,7 +327,8 @@ def levenberg_marquardt(
         rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
         accepted = ok and rho > 0
         if accepted:
-            decrease = (cost - cost_new) / cost
+            absolute_decrease = cost - cost_new
+            decrease = absolute_decrease / cost
             z, r, jac, aux, cost = z + h, r_new, jac_new, aux_new, cost_new
             mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
             nu = 2.0
@@ -312,6 +349,9 @@ def levenberg_marquardt(
             callback(history[-1])
         if accepted and decrease < ftol:
             converged, message = True, "relative cost decrease below tolerance"
+            break
+        if accepted and absolute_decrease < ctol:
+            converged, message = True, "cost decrease below ctol (statistically negligible)"
             break
     info = dict(
         iterations=iteration,
@@ -373,6 +413,7 @@ def fit(
     control: Mapping | None = None,
     max_iterations: int = 30,
     ftol: float = 1e-8,
+    ctol: float | None = None,
     starts: int = 0,
     seed: int = 0,
     callback: Callable | None = None,
@@ -393,6 +434,9 @@ def fit(
       points plus the guess, evaluated as one batch on the first residual stage; LM starts
       from the best. 0 (default) starts from the guess.
     - `callback(entry)`: called after every LM trial step with a history entry.
+    - `ftol`, `ctol`: a stage stops when an accepted step lowers ½|r|² by less than `ftol`
+      relative or `ctol` absolute (default 1e-3 when the noise levels are given, so the
+      residuals are in noise units and ½ is one standard error; else 0).
 
     **Returns:** a `FitResult`.
     """
@@ -409,9 +453,14 @@ def fit(
     model_initial = None
     if starts < 0:
         raise ValueError(f"starts = {starts!r} is invalid: it must be ≥ 0")
-    for k, spec in enumerate(specs):
-        comparison = Comparison(data, spec)
-        model = Model(scene, params, base, comparison, control, simulate_options)
+    compiled = {}  # one compiled model per set of save times, shared by the stages
+    comparisons = [Comparison(data, spec) for spec in specs]
+    for k, (spec, comparison) in enumerate(zip(specs, comparisons, strict=True)):
+        if comparison.n_save not in compiled:
+            compiled[comparison.n_save] = Model(
+                scene, params, base, comparison.names, comparison.ts, control, simulate_options
+            )
+        model = StageModel(compiled[comparison.n_save], comparison)
         if k == 0 and starts:
             candidates = np.vstack([z[None, :], latin_hypercube_starts(params, starts, seed)])
             costs = model.costs(candidates)
@@ -450,14 +499,21 @@ def fit(
                 callback(entry)
 
         z, r, jac, aux, info = levenberg_marquardt(
-            model, z, max_iterations=max_iterations, ftol=ftol, callback=report
+            model,
+            z,
+            max_iterations=max_iterations,
+            ftol=ftol,
+            ctol=(1e-3 if comparison.noise_known else 0.0) if ctol is None else ctol,
+            callback=report,
         )
         evaluations += info["evaluations"]
         if model_initial is None:
             model_initial = info["aux_initial"]
         stages.append(
             dict(
-                spec=dict(kind=spec.kind, windows=spec.windows, block=spec.block),
+                spec=dict(
+                    kind=spec.kind, windows=spec.windows, block=spec.block, width=spec.width
+                ),  # fmt: skip
                 iterations=info["iterations"],
                 converged=info["converged"],
                 message=info["message"],
@@ -484,6 +540,7 @@ def fit(
         wall_time=time.perf_counter() - start,
         comparison=comparison,
         model_initial=model_initial,
+        comparison_initial=comparisons[0],
         model_final=aux,
         stages=stages,
         **details,

@@ -26,13 +26,14 @@ def plot_fit(result, out_dir: str) -> list[str]:
     cmp_ = result.comparison
     for name in cmp_.names:
         data = cmp_.data_features[name]
-        initial = np.asarray(cmp_.features(result.model_initial[name]))
-        final = np.asarray(cmp_.features(result.model_final[name]))
+        first = result.comparison_initial or cmp_  # the initial model ran on the first stage
+        initial = first.features_np(result.model_initial[name])
+        final = cmp_.features_np(result.model_final[name])
         fig, (ax, axr) = plt.subplots(
             2, 1, figsize=(8, 5.5), sharex=True, gridspec_kw={"height_ratios": [3, 1]}
         )
         ax.plot(cmp_.times, data, ".", ms=2.5, color="0.4", label="data")
-        ax.plot(cmp_.times, initial, "-", lw=1, color="tab:orange", label="initial guess")
+        ax.plot(first.times, initial, "-", lw=1, color="tab:orange", label="initial guess")
         ax.plot(cmp_.times, final, "-", lw=1.2, color="tab:blue", label="fitted")
         ax.set_ylabel(name)
         ax.legend(loc="best", fontsize=8)
