@@ -46,6 +46,10 @@ from ._residuals import Comparison, ResidualSpec
 # identified; a pair with |correlation| above CORRELATED as confounded.
 NOT_IDENTIFIED = 0.5
 CORRELATED = 0.95
+# LM keeps the internal coordinates in [−ZMAX, ZMAX]: within ~e^(−20) ≈ 2e-9 of a bound in
+# the logistic variable, a parameter is reported "at its bound" (further, its dθ/dz
+# underflows and its column of the Jacobian is lost to roundoff).
+ZMAX = 20.0
 
 
 @dataclass
@@ -107,15 +111,13 @@ class FitResult:
                     out.append((a, self.names[j], c))
         return out
 
-    def unresolved_combinations(self, threshold: float = 0.05) -> list[dict[str, float]]:
+    def unresolved_combinations(self, threshold: float = 0.01) -> list[dict[str, float]]:
         """The unseen directions that mix two or more parameters not at a bound (components
         of the unit vector in ln θ above `threshold`): the data fix every combination of
         these parameters except this one (e.g. E and ν, seen only through E/(1 − ν²))."""
         out = []
         for direction in self.unresolved:
-            kept = {
-                n: c for n, c in direction.items() if abs(c) > threshold and n not in self.at_bound
-            }
+            kept = {n: c for n, c in direction.items() if abs(c) > threshold}
             if len(kept) >= 2:
                 out.append(kept)
         return out
@@ -282,6 +284,7 @@ def levenberg_marquardt(
     xtol: float = 1e-8,
     gtol: float = 1e-10,
     tau: float = 1e-3,
+    zmax: float = math.inf,
     callback: Callable | None = None,
 ):
     """Minimise ½|r(z)|² with `model(z) -> (r, J, aux, ok)` (Madsen et al. 2004, Alg. 3.16,
@@ -317,13 +320,14 @@ def levenberg_marquardt(
         d = np.maximum(np.diag(a), 1e-12 * max(np.max(np.diag(a)), 1e-300))
         mu = tau if mu is None else mu
         h = np.linalg.solve(a + mu * np.diag(d), -g)
+        h = np.clip(z + h, -zmax, zmax) - z  # internal coordinates kept in [−zmax, zmax]
         if np.linalg.norm(h) <= xtol * (np.linalg.norm(z) + xtol):
             converged, message = True, "step below tolerance"
             break
         r_new, jac_new, aux_new, ok = model(z + h)
         evaluations += 1
         cost_new = 0.5 * float(r_new @ r_new) if ok else math.inf
-        predicted = 0.5 * float(h @ (mu * d * h - g))
+        predicted = -float(g @ h + 0.5 * h @ (a @ h))  # the Gauss–Newton model's decrease
         rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
         accepted = ok and rho > 0
         if accepted:
@@ -364,7 +368,7 @@ def levenberg_marquardt(
     return z, r, jac, aux, info
 
 
-def _curvature(parameters, z, r, jac, noise_known):
+def _curvature(parameters, z, r, jac, noise_known, zmax=math.inf):
     """Covariance, standard errors, correlations and singular values at the optimum."""
     theta = np.array([float(p.to_physical(zk)) for p, zk in zip(parameters, z, strict=True)])
     dtheta = np.array([p.dphysical_dz(zk) for p, zk in zip(parameters, z, strict=True)])
@@ -372,6 +376,9 @@ def _curvature(parameters, z, r, jac, noise_known):
     # say nothing about it there beyond "at the bound", so its column is left out (zero),
     # which gives it an infinite standard error below.
     at_bound = ~(np.abs(dtheta) > 0) | ~np.isfinite(dtheta)
+    # Pinned by LM's limit on z: within e^(−zmax) of the bound in the logistic variable, so
+    # "at the bound" for the report; its column (still finite) is kept.
+    pinned = np.abs(np.asarray(z)) >= zmax
     with np.errstate(invalid="ignore", divide="ignore"):
         jac_theta = np.where(at_bound, 0.0, jac / np.where(at_bound, 1.0, dtheta))  # ∂r/∂θ
     jac_rel = jac_theta * theta  # ∂r/∂ln θ: columns comparable across units
@@ -398,7 +405,7 @@ def _curvature(parameters, z, r, jac, noise_known):
     unresolved = [
         {n: float(c) for n, c in zip(names, row, strict=True) if abs(c) > 1e-6} for row in vt[~seen]
     ]
-    details = dict(at_bound=[n for n, b in zip(names, at_bound, strict=True) if b],
+    details = dict(at_bound=[n for n, b in zip(names, at_bound | pinned, strict=True) if b],
                    unresolved=unresolved)  # fmt: skip
     return theta, se, corr, cov, s, chi2, details
 
@@ -503,6 +510,7 @@ def fit(
             z,
             max_iterations=max_iterations,
             ftol=ftol,
+            zmax=ZMAX,
             ctol=(1e-3 if comparison.noise_known else 0.0) if ctol is None else ctol,
             callback=report,
         )
@@ -520,7 +528,9 @@ def fit(
                 cost=0.5 * float(r @ r),
             )
         )
-    theta, se, corr, cov, s, chi2, details = _curvature(params, z, r, jac, comparison.noise_known)
+    theta, se, corr, cov, s, chi2, details = _curvature(
+        params, z, r, jac, comparison.noise_known, zmax=ZMAX
+    )
     names = [p.name for p in params]
     return FitResult(
         parameters=params,

@@ -24,6 +24,14 @@ def plot_fit(result, out_dir: str) -> list[str]:
 
     files = []
     cmp_ = result.comparison
+    # The model where LM started (the guess, or the best point of a multistart), on the
+    # first stage's residuals (e.g. smoothed channels).
+    first_spec = (result.comparison_initial or cmp_).spec
+    start_label = "start of the fit" + (
+        f" (smoothed over {first_spec.width * 1e3:g} ms)" if first_spec.kind == "smooth"
+        else f" ({first_spec.block * 1e3:g} ms block means)" if first_spec.kind == "block"
+        else ""
+    )  # fmt: skip
     for name in cmp_.names:
         data = cmp_.data_features[name]
         first = result.comparison_initial or cmp_  # the initial model ran on the first stage
@@ -33,7 +41,7 @@ def plot_fit(result, out_dir: str) -> list[str]:
             2, 1, figsize=(8, 5.5), sharex=True, gridspec_kw={"height_ratios": [3, 1]}
         )
         ax.plot(cmp_.times, data, ".", ms=2.5, color="0.4", label="data")
-        ax.plot(first.times, initial, "-", lw=1, color="tab:orange", label="initial guess")
+        ax.plot(first.times, initial, "-", lw=1, color="tab:orange", label=start_label)
         ax.plot(cmp_.times, final, "-", lw=1.2, color="tab:blue", label="fitted")
         ax.set_ylabel(name)
         ax.legend(loc="best", fontsize=8)

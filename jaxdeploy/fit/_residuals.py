@@ -75,6 +75,7 @@ class Comparison:
     """
 
     def __init__(self, data: Measurements, spec: ResidualSpec):
+        self.spec = spec
         t = np.asarray(data.t)
         mask = np.zeros(t.shape, bool)
         for t0, t1 in spec.windows or [(t[0], t[-1])]:
