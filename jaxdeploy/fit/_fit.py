@@ -244,7 +244,12 @@ class StageModel:
         """Costs ½|r|² of many points `zs` (k, p) as one vmapped batch; inf where the
         simulation failed or gave non-finite residuals."""
         channels, ok = self.model.channels_batch(zs)
-        cost = np.array(
+        with np.errstate(invalid="ignore", over="ignore"):  # failed runs: NaN channels
+            cost = self._costs(channels, ok)
+        return np.where(ok & np.isfinite(cost), cost, np.inf)
+
+    def _costs(self, channels, ok):
+        return np.array(
             [
                 0.5 * float(np.sum(r * r))
                 for r in (
@@ -253,7 +258,6 @@ class StageModel:
                 )
             ]
         )
-        return np.where(ok & np.isfinite(cost), cost, np.inf)
 
     def __call__(self, z):
         channels, jac, ok = self.model(z)
