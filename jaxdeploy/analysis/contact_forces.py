@@ -11,7 +11,9 @@ from ..mechanism import Mechanism, RevoluteClearance
 def clearance_joint_history(mechanism: Mechanism, trajectory) -> dict[int, dict]:
     """For every clearance joint (by element index): eccentricity (N, 2), penetration,
     penetration rate, sliding velocity, normal force and friction force (N,) at the saved
-    states, evaluated with the saved memory (impact velocities)."""
+    states, evaluated with the saved memory (impact velocities). The forces are net of the
+    bore's near and far side (`RevoluteClearance.contact_forces`; the far side is zero unless
+    the clearance is below ~3σ)."""
     out = {}
     for index in mechanism.find(RevoluteClearance):
         joint = mechanism.elements[index]

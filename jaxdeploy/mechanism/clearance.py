@@ -4,7 +4,7 @@ surfaces meet (Flores & Ambrósio 2004; Flores et al. 2008; DESIGN §2.2; LITERA
 With P_i the bearing centre (on `bearing_body`) and P_j the journal centre (on `journal_body`):
 
     e = r_Pj − r_Pi,  |e| = sqrt(e·e + ε²),  n = e/|e|,  t = (−n_y, n_x)
-    δ = |e| − c                      (penetration; δ < 0 is a gap)
+    δ = |e| − c                      (penetration on the near side; δ < 0 is a gap)
     Q_k = P_k + R_k n                (contact points; R_i = R_j + c is the bearing radius)
     v = ṙ_Qj − ṙ_Qi,   δ̇ = v·n,   v_t = v·t
     force on the journal −(F_N n + F_T t) at Q_j; the opposite on the bearing at Q_i.
@@ -13,13 +13,39 @@ With P_i the bearing centre (on `bearing_body`) and P_j the journal centre (on `
 law; with `friction=None` no friction code is traced. ε (default 1e-12 m) keeps the centred
 joint (e = 0) differentiable.
 
+**Both sides of the bearing.** The journal also meets the bearing on the far side, along −n:
+
+    δ' = −|e| − c,   δ̇' = −δ̇,   Q'_k = P_k − R_k n,   v' = ṙ_Q'j − ṙ_Q'i,   v'_t = −v'·t
+    force on the journal +(F'_N n + F'_T t) at Q'_j (normal −n, tangent −t); opposite on the bearing
+
+with the same laws: `F'_N = F_N(δ', δ̇', v⁻)`, `F'_T = F_T(v'_t, F'_N)`. The net normal force
+on the journal is −(F_N(δ) − F_N(δ')) n. For a Hertz law (σ = 0) the far force is exactly 0; for
+the rough law it is K σ^n F_n(s0 + (|e| + c)/σ), ≤ 3e-25 K σ^n for c ≥ 10σ (n = 1.5, s0 = 0)
+and exactly 0 (underflow) for c ≥ 38σ: the joint is then the single-contact-point model of
+the references. It matters when c ≲ 3σ: the rough law (Greenwood–Williamson average, force from
+δ ≈ (s0 − 3)σ) is then active on *both* sides with the journal centred, as the asperities of a
+journal in a bore with a clearance of the order of the roughness are. A single contact point
+would push the centred journal with F_e(−c) along a direction n = e/|e| that flips within ε of
+e = 0: a stiffness F_e(−c)/ε (5.7e13 N/m for c = σ = 1 µm, K of a steel pin) and a force
+discontinuous in e as ε → 0. With both sides, the elastic part
+g(r) = F_e(r − c) − F_e(−r − c) is odd in r = |e|, so g(|e|) n = (g(r)/r) e is smooth in e
+(g(r)/r is even, smooth in r²) and vanishes at e = 0 with the finite stiffness 2 F_e'(−c) I,
+without needing ε. The contact potential is U(δ) + U(δ'). This is a two-point (diametral)
+lumping of the contact around the circumference (docs/contact.md); it does not represent the
+±t sides, so the damping (along n, ∝ δ̇ = ė·n) and the friction (along t) still turn with e:
+their derivative across e is of order χ (F_e(δ) + F_e(δ')) |ė| / (v⁻ |e|), zero for a journal
+at rest, and inside |e| ≲ ε (where n shrinks to 0) they are regularised on the scale ε.
+
 Memory (only for laws that need the impact velocity v⁻): `in_contact`, `impact_velocity` and
 `penetration`, updated after each accepted step. v⁻ is the **largest approach speed of the
 current contact**, a continuous-time definition that no step sequence changes:
 
     v⁻(t) = max_{s ∈ [t_on, t]} δ̇(s),      t_on = the onset (δ crosses the law's onset upward)
 
-and the damping law sees `max(v⁻, δ̇)`, the running maximum including the present state. In an
+and the damping law sees `max(v⁻, δ̇)`, the running maximum including the present state. The far
+side shares the joint's v⁻ (one contact episode, whichever wall) and sees `max(v⁻, δ̇')`: its
+damping ratio χ δ̇'/max(v⁻, δ̇') is ≤ χ too, and the net force is the same function of the state
+on either side of e = 0, where near and far swap. In an
 ordinary impact the approach decelerates from onset, so v⁻ = δ̇(t_on), the onset speed of
 Lankarani & Nikravesh (1990) and Flores & Ambrósio (2010). When the approach keeps speeding up
 after onset (a contact driven in by the mechanism, or one that starts at rest: a centred
@@ -77,6 +103,16 @@ class ClearanceGeometry:
         self.penetration_rate = jnp.dot(v, n)
         self.sliding_velocity = jnp.dot(v, t)
         self.contact_point_bearing, self.contact_point_journal = qi, qj
+        # The far side (normal −n, tangent −t); δ̇' = −δ̇ exactly (rotation terms are along t).
+        qi_far = pi - radius_bearing * n
+        qj_far = pj - joint.journal_radius * n
+        v_far = contact_point_velocity(joint.journal_body, qj_far) - contact_point_velocity(
+            joint.bearing_body, qi_far
+        )
+        self.far_penetration = -norm_e - joint.clearance
+        self.far_penetration_rate = -self.penetration_rate
+        self.far_sliding_velocity = -jnp.dot(v_far, t)
+        self.far_contact_point_bearing, self.far_contact_point_journal = qi_far, qj_far
 
 
 class _StepPenetration:
@@ -219,28 +255,45 @@ class RevoluteClearance(AbstractElement):
             "penetration_rate": g.penetration_rate,
         }
 
-    def contact_forces(self, kin: Kinematics, memory):
-        """`(F_N, F_T, geometry)` at state `kin`."""
+    def side_forces(self, kin: Kinematics, memory):
+        """`(F_N, F_T, geometry)` at state `kin`, each force an array `[near, far]` (both
+        sides evaluated at once by the element-wise laws; module docstring)."""
         g = self.geometry(kin)
+        delta = jnp.stack([g.penetration, g.far_penetration])
+        rate = jnp.stack([g.penetration_rate, g.far_penetration_rate])
         # The running maximum of the approach speed includes the present state (docstring).
-        v_minus = (
-            None if memory is None else jnp.maximum(memory["impact_velocity"], g.penetration_rate)
-        )
-        fn = self.normal.force(g.penetration, g.penetration_rate, v_minus)
-        ft = 0.0 if self.friction is None else self.friction.force(g.sliding_velocity, fn)
+        v_minus = None if memory is None else jnp.maximum(memory["impact_velocity"], rate)
+        fn = self.normal.force(delta, rate, v_minus)
+        if self.friction is None:
+            ft = jnp.zeros_like(fn)
+        else:
+            sliding = jnp.stack([g.sliding_velocity, g.far_sliding_velocity])
+            ft = self.friction.force(sliding, fn)
         return fn, ft, g
 
+    def contact_forces(self, kin: Kinematics, memory):
+        """`(F_N, F_T, geometry)` at state `kin`: the net normal force on the journal along
+        −n, `F_N(δ) − F_N(δ')`, and the net friction force along −t, `F_T − F'_T` (near side
+        minus far side; the far side is zero unless c ≲ 3σ)."""
+        fn, ft, g = self.side_forces(kin, memory)
+        return fn[0] - fn[1], ft[0] - ft[1], g
+
     def wrenches(self, kin: Kinematics, t, memory):
-        fn, ft, g = self.contact_forces(kin, memory)
-        f_journal = -(fn * g.normal + ft * g.tangent)
+        fn, ft, g = self.side_forces(kin, memory)
+        f_near = -(fn[0] * g.normal + ft[0] * g.tangent)
+        f_far = fn[1] * g.normal + ft[1] * g.tangent
         return [
-            Wrench(self.journal_body, force=f_journal, point=g.contact_point_journal),
-            Wrench(self.bearing_body, force=-f_journal, point=g.contact_point_bearing),
+            Wrench(self.journal_body, force=f_near, point=g.contact_point_journal),
+            Wrench(self.bearing_body, force=-f_near, point=g.contact_point_bearing),
+            Wrench(self.journal_body, force=f_far, point=g.far_contact_point_journal),
+            Wrench(self.bearing_body, force=-f_far, point=g.far_contact_point_bearing),
         ]
 
     def potential_energy(self, kin: Kinematics, memory):
-        """Elastic energy of the contact, `U(δ)` of the normal law's elastic part."""
-        return self.normal.elastic.potential(self.geometry(kin).penetration)
+        """Elastic energy of the contact on both sides, `U(δ) + U(δ')` of the normal law's
+        elastic part."""
+        g = self.geometry(kin)
+        return jnp.sum(self.normal.elastic.potential(jnp.stack([g.penetration, g.far_penetration])))
 
     def idealized(self) -> Revolute:
         return Revolute(
