@@ -37,9 +37,13 @@ def test_odd_and_bounded(name, v, normal):
 
 @pytest.mark.parametrize("name", sorted(LAWS))
 def test_finite_gradient_at_zero_speed(name):
+    """At v_t = 0 (issue 8's zero sliding speed) both partial derivatives are finite and equal
+    central differences (steps far below the laws' slip widths, ≥ 1e-4 m/s)."""
     law, _ = LAWS[name]
     g_v, g_n = jax.grad(law.force, argnums=(0, 1))(0.0, 100.0)
     assert np.isfinite(float(g_v)) and np.isfinite(float(g_n))
+    assert_grad_matches_fd(g_v, lambda v: law.force(v, 100.0), 0.0, rtol=1e-6, abs_step=1e-9)
+    assert_grad_matches_fd(g_n, lambda f: law.force(0.0, f), 100.0, rtol=1e-6, atol=1e-12)
 
 
 def test_sliding_limit_and_slip_width():

@@ -284,6 +284,13 @@ def test_gradient_finite_across_latch_engagement():
     grad = jax.grad(lambda x: final_angle(x)[0])(x)
     assert np.all(np.isfinite(np.asarray(grad)))
     assert float(grad[1]) != 0.0  # the latch stiffness matters after engagement
+    # Against central differences of the same fixed-step map (the engagement stays in the
+    # same step for relative changes of 1e-6).
+    for k in range(2):
+        step = 1e-6 * float(x[k])
+        dx = jnp.zeros(2).at[k].set(step)
+        fd = (float(final_angle(x + dx)[0]) - float(final_angle(x - dx)[0])) / (2 * step)
+        assert float(grad[k]) == pytest.approx(fd, rel=1e-5, abs=1e-9), k
 
 
 def test_potential_energies_are_the_conservative_forces():

@@ -26,8 +26,8 @@ the references. It matters when c ≲ 3σ: the rough law (Greenwood–Williamson
 δ ≈ (s0 − 3)σ) is then active on *both* sides with the journal centred, as the asperities of a
 journal in a bore with a clearance of the order of the roughness are. A single contact point
 would push the centred journal with F_e(−c) along a direction n = e/|e| that flips within ε of
-e = 0: a stiffness F_e(−c)/ε (5.7e13 N/m for c = σ = 1 µm, K of a steel pin) and a force
-discontinuous in e as ε → 0. With both sides, the elastic part
+e = 0: a stiffness F_e(−c)/ε (docs/contact.md tabulates it) and a force discontinuous in e
+as ε → 0. With both sides, the elastic part
 g(r) = F_e(r − c) − F_e(−r − c) is odd in r = |e|, so g(|e|) n = (g(r)/r) e is smooth in e
 (g(r)/r is even, smooth in r²) and vanishes at e = 0 with the finite stiffness 2 F_e'(−c) I,
 without needing ε. The contact potential is U(δ) + U(δ'). This is a two-point (diametral)
