@@ -202,13 +202,13 @@ def _impact(damping, **overrides):
 
 @pytest.mark.parametrize("damping", ["none", "flores"])
 def test_impact_at_clearance_equal_to_sigma_balances_energy(damping):
-    """c = σ = 1 µm, journal launched from the centre at 1 m/s, 1 ms (it rattles): finite,
+    """c = σ = 1 µm, journal launched from the centre at 1 m/s, 0.5 ms (it rattles): finite,
     T + V + D = E0 to the stated tolerance (docs/robustness.md), nothing dissipated by the
     undamped law, dissipation never negative for Flores."""
     scene, params = _impact(damping)
     mech = metered(scene.build(params))
     mech, init = add_clock(mech, scene.initial_state(params, mech))
-    traj = simulate(mech, init, 1e-3, rtol=1e-8, atol=1e-13, dt_max=1e-5, n_save=101)
+    traj = simulate(mech, init, 5e-4, rtol=1e-8, atol=1e-13, dt_max=1e-5, n_save=101)
     assert traj.ok, traj.status()
     assert np.all(np.isfinite(np.asarray(traj.q)))
     balance = energy_balance(mech, traj.q, traj.v, traj.memory)
@@ -245,6 +245,7 @@ def test_run_derivatives_from_the_centre_match_central_differences():
         np.testing.assert_allclose(rev[name], fd[name], rtol=0, atol=1e-4 * scale, err_msg=name)
 
 
+@pytest.mark.slow
 def test_forward_mode_through_the_raw_adaptive_loop_is_finite():
     """The directional derivative of experiments/robustness.py (all parameters at once,
     `diffrax.ForwardMode`) for c = σ = 1 µm from the centre."""
