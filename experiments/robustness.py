@@ -418,7 +418,13 @@ def _verdict_lines(cases):
             else f"outputs or dissipated energy within {SOLVERS_TOL:g} in every case"
         ),  # fmt: skip
         "* directional derivatives: "
-        + (f"NaN/inf in {'; '.join(bad_grad)}" if bad_grad else "finite in every case run"),
+        + (
+            f"NaN/inf in {'; '.join(bad_grad)}"
+            if bad_grad
+            else "finite in every case run"
+            if any("gradient_finite" in r for r in cases.values())
+            else "not computed"
+        ),
         f"* smallest accepted step {min_step:.1e} s",
     ]
     return "\n".join(lines) + "\n"
