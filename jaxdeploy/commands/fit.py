@@ -133,6 +133,14 @@ def _windows(items):
     return tuple(out) or None
 
 
+def _float_list(option: str, text: str, expected: str) -> list[float]:
+    """Comma-separated numbers of a command-line option, or an error naming it."""
+    try:
+        return [float(x) for x in text.split(",")]
+    except ValueError:
+        raise ValueError(f"{option} {text!r}: expected {expected}") from None
+
+
 def _stages(args, data):
     from ..fit import ResidualSpec
 
@@ -141,12 +149,7 @@ def _stages(args, data):
     width = args.width if args.loss == "smooth" else None
     widths = []
     if args.widths:
-        try:
-            widths = [float(w) for w in args.widths.split(",")]
-        except ValueError:
-            raise ValueError(
-                f"--widths {args.widths!r}: expected widths in s, e.g. 0.004,0.001"
-            ) from None
+        widths = _float_list("--widths", args.widths, "widths in s, e.g. 0.004,0.001")
         if args.loss == "smooth":
             raise ValueError(
                 "--widths ends with a stage of independent residuals: give --loss trajectory "
@@ -163,12 +166,7 @@ def _stages(args, data):
 
     if not args.horizons:
         return stages_up_to(windows)
-    try:
-        horizons = [float(h) for h in args.horizons.split(",")]
-    except ValueError:
-        raise ValueError(
-            f"--horizons {args.horizons!r}: expected times in s, e.g. 0.05,0.2"
-        ) from None
+    horizons = _float_list("--horizons", args.horizons, "times in s, e.g. 0.05,0.2")
     increasing = all(b > a for a, b in zip(horizons, horizons[1:], strict=False))
     if not increasing or horizons[0] <= data.t[0]:
         raise ValueError(f"--horizons {args.horizons!r}: times must increase and exceed t[0]")
