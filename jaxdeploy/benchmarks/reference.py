@@ -171,17 +171,19 @@ def reference_solution(
         )
         if not tr.ok:
             raise RuntimeError(f"reference run {solver} rtol={tol:g}: {tr.status()}")
-        return np.asarray(tr.q), int(tr.stats["num_accepted_steps"]), tr
+        return tr
 
-    ref_q, _, ref = run("dopri8", rtol, dt_max)
+    ref = run("dopri8", rtol, dt_max)
+    ref_q = np.asarray(ref.q)
     checks = [
         ("dopri8", 10 * rtol, dt_max and 2 * dt_max),
         ("tsit5", 10 * rtol, dt_max),
     ]
     evidence = []
     for solver, tol, check_dt_max in checks:
-        q, steps, _ = run(solver, tol, check_dt_max)
-        window, full = eccentricity_error(mech, q, ref_q, ts, window_end)
+        check = run(solver, tol, check_dt_max)
+        window, full = eccentricity_error(mech, np.asarray(check.q), ref_q, ts, window_end)
+        steps = int(check.stats["num_accepted_steps"])
         evidence.append(
             dict(
                 solver=solver, rtol=tol, dt_max=check_dt_max, window=window, full=full, steps=steps

@@ -268,29 +268,23 @@ def benchmark_reference(
 
 
 def run_benchmark(
-    scene_name: str = "slider_crank",
+    scene_name: str,
+    reference: Reference,
     *,
     quick: bool = False,
     repeats: int = 3,
-    t_end: float | None = None,
-    n_save: int | None = None,
-    reference: Reference | None = None,
     done: list[Row] = (),
     on_row=None,
     log=print,
-) -> tuple[Reference, list[Row]]:
+) -> list[Row]:
     """Run every configuration of `configurations(scene_name, quick)` that is not in `done`
-    (rows of an interrupted run, matched by family, label and kind), calling `on_row(rows)`
-    with all rows so far after each one, so that a caller can write them before the next
-    configuration starts.
+    (rows of an interrupted run, matched by family, label and kind) against `reference`
+    (`benchmark_reference`), calling `on_row(rows)` with all rows so far after each one, so
+    that a caller can write them before the next configuration starts.
 
-    **Returns:** `(reference, rows)`, rows in configuration order.
+    **Returns:** the rows, in configuration order.
     """
     scene = get_scene(scene_name)
-    if reference is None:
-        log(f"reference for {scene_name} ...")
-        reference = benchmark_reference(scene_name, quick=quick, t_end=t_end, n_save=n_save)
-        log(f"  evidence: {reference.evidence}")
     params = reference.params
     mech = scene.build(params)
     s0 = scene.initial_state(params, mech)
@@ -356,15 +350,13 @@ def run_benchmark(
         start = time.perf_counter()
         q, steps, rejected, newton, status = call()
         first = time.perf_counter() - start
-        walls = []
-        # Paths without compilation need no second run when the first alone used the budget.
+        # A path without compilation whose first run alone used the budget is timed by it.
+        walls = [first] if not compiled and first >= TIMING_BUDGET_S else []
         while len(walls) < repeats and sum(walls) < TIMING_BUDGET_S:
-            if not walls and not compiled and first >= TIMING_BUDGET_S:
-                break
             start = time.perf_counter()
             call()
             walls.append(time.perf_counter() - start)
-        wall = float(np.median(walls)) if walls else first
+        wall = float(np.median(walls))
         # Compile time is meaningful for the jitted paths only (scipy-jitted: the RHS).
         compile_s = max(first - wall, 0.0) if compiled else 0.0
         window, full = eccentricity_error(mech, q, reference.q, ts, reference.window_end)
@@ -390,7 +382,7 @@ def run_benchmark(
         rows.append(row)
         if on_row is not None:
             on_row(rows)
-    return reference, rows
+    return rows
 
 
 def rows_as_dicts(rows: list[Row]) -> list[dict]:

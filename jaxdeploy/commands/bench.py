@@ -67,11 +67,11 @@ def run(args) -> int:
     def write(rows):  # after every configuration: an interrupted run loses at most one
         write_report(out, args.scene, reference, rows, options)
 
-    reference, rows = run_benchmark(
+    rows = run_benchmark(
         args.scene,
+        reference,
         quick=args.quick,
         repeats=repeats,
-        reference=reference,
         done=done,
         on_row=write,
         log=lambda message: print(message, flush=True),
