@@ -21,6 +21,7 @@ from ._validation import check_nonnegative, check_positive, check_range, is_conc
 from .mechanism import ConsistentState, Mechanism
 from .solvers import (
     GeneralizedAlpha,
+    LocateEvents,
     MechanismODESolver,
     MechanismState,
     MechanismTerm,
@@ -271,6 +272,7 @@ def simulate(
     adjoint=None,
     step_ts=None,
     replay_steps=False,
+    locate_events=True,
 ) -> Trajectory:
     """Integrate `mechanism` from `initial` (a `consistent_state`) to `t_end`.
 
@@ -302,6 +304,11 @@ def simulate(
       integrates over the same steps, which is what a finite difference of a replayed run
       must do.
 
+    - `locate_events`: with adaptive steps, a step inside which a clearance joint's contact
+      begins is redone to end just past the onset (`jaxdeploy.solvers.LocateEvents`), so the
+      onset speed v⁻ is as accurate as the state; without it v⁻'s error is set by the step
+      length, not by the tolerance. Only mechanisms with such events trace it.
+
     **Returns:** a `Trajectory`; check `.ok` / `.status()`: a failed solve keeps the states it
     finished and says when and why it stopped.
     """
@@ -329,6 +336,9 @@ def simulate(
         if not control.adaptive:
             raise ValueError("step_ts needs adaptive steps (give rtol/atol)")
         controller = dfx.ClipStepSizeController(controller, step_ts=jnp.asarray(step_ts, float))
+    if locate_events and control.adaptive and mechanism.event_fraction(y0.memory) is not None:
+        dt_min_data = None if dt_min is None else jnp.asarray(dt_min, dtype=float)
+        controller = LocateEvents(controller, mechanism, dt_min=dt_min_data)
     step_times = None
     if replay_steps is True:
         if not control.adaptive:

@@ -137,3 +137,49 @@ def test_gradient_through_kvaerno_path_matches_finite_differences():
     fd = (final_x(0.7 + step) - final_x(0.7 - step)) / (2 * step)
     assert np.isfinite(float(grad))
     np.testing.assert_allclose(float(grad), float(fd), rtol=1e-4)
+
+
+def test_adaptive_steps_end_on_the_events_that_set_v_minus(slider_crank):
+    """`simulate(..., locate_events=True)` (the default): a step inside which the contact
+    begins, or inside which δ̇ peaks above v⁻, is redone to end just past that event
+    (`jaxdeploy.solvers.LocateEvents`). Against the event-exact numpy model: a step ends
+    within 5 ns of both events (a contact lasts 53 µs; without location the peak fell 43 ns
+    from the nearest step end with Dopri8 at this tolerance), and v⁻ equals the peak speed."""
+    params, mech, s0 = slider_crank
+    ts = np.linspace(0.0, WINDOW, 36)
+    tr = simulate(
+        mech, s0, WINDOW, ts=ts, solver="dopri8", rtol=1e-10, atol=1e-13, replay_steps=True
+    )
+    assert tr.ok, tr.status()
+    peer = SliderCrankNumpy(params).solve(s0, WINDOW, ts, "DOP853", 1e-12, 1e-14)
+    (onset, _, _), (peak, _, peak_speed) = peer.events[:2]
+    ends = np.asarray(tr.step_times)
+    ends = ends[np.isfinite(ends)]
+    for event in (onset, peak):
+        assert np.min(np.abs(ends - event)) < 5e-9, (event, ends[np.abs(ends - event) < 1e-7])
+    in_contact = np.asarray(tr.memory[4]["in_contact"]) > 0.5
+    v_minus = np.asarray(tr.memory[4]["impact_velocity"])[in_contact][-1]
+    np.testing.assert_allclose(v_minus, peak_speed, rtol=1e-8)
+
+
+def test_dense_output_is_the_inner_solvers_interpolant():
+    """Outputs between steps come from the inner solver's own interpolant (Dopri8: 7th order),
+    not a cubic Hermite: on the ideal slider-crank (kinematically driven, so positions are
+    known in closed form) the slider position at 241 times over a revolution, 39 steps, is
+    within 1e-9 m (the cubic Hermite of the same steps was 1e-6 m off)."""
+    from jaxdeploy.scenes.slider_crank import ideal_slider_kinematics
+
+    scene = SliderCrank(ideal=True)
+    params = scene.resolve_params()
+    mech = scene.build(params)
+    s0 = scene.initial_state(params, mech)
+    t_rev = 2 * np.pi / params["crank_speed"]
+    ts = np.linspace(0.0, t_rev, 241)
+    tr = simulate(mech, s0, t_rev, ts=ts, solver="dopri8", rtol=1e-10, atol=1e-13)
+    assert tr.ok
+    assert int(tr.stats["num_accepted_steps"]) < 60  # long steps: the interpolant matters
+    x, v, _ = ideal_slider_kinematics(
+        params["crank_length"], params["rod_length"], params["crank_speed"], ts
+    )
+    assert np.max(np.abs(np.asarray(tr.q[:, 6]) - x)) < 1e-9
+    assert np.max(np.abs(np.asarray(tr.v[:, 6]) - v)) < 1e-6

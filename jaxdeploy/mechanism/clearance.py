@@ -57,9 +57,16 @@ large and captured a 10 m/s impact).
 Discretely, after each accepted step δ(t) is the cubic Hermite interpolant of the step's end
 values (δ, δ̇): the onset is located on it (where taking δ̇ at the step's start would be an
 O(h) error) and the running maximum includes the interpolant's maximum inside the step (an
-interior peak missed between step ends would be O(h²)). Both are then O(h⁴)-accurate
-quantities of the continuous model, below any solver's own error. "In contact" means δ beyond the
-elastic law's onset (0 for Hertz, about (s0 − 3)σ for the rough law).
+interior peak missed between step ends would be O(h²)). For a smooth δ(t) these are
+O(h⁴)-accurate, but inside a step that crosses a Hertz onset δ(t) carries a (t − t_on)^3.5 term
+that no cubic follows, and at an interior peak the force's dependence on max(v⁻, δ̇) has a kink:
+the interpolated v⁻ then errs by an amount the step length sets and no error estimate sees
+(measured on slider_crank: a tighter tolerance stopped improving the solution at ~1e-6 of c).
+So the memory also records `event_fraction`, where in the step the onset or a v⁻-raising peak
+fell, and adaptive runs redo such a step to end just past the event
+(`jaxdeploy.solvers.LocateEvents`): v⁻ is then taken where the interpolant is exact to round-off.
+"In contact" means δ beyond the elastic law's onset (0 for Hertz, about (s0 − 3)σ for the rough
+law).
 """
 
 from __future__ import annotations
@@ -158,12 +165,18 @@ class _StepPenetration:
             s = jnp.clip(s, 0.0, 1.0)
         return s
 
-    def max_rate(self, s_start):
-        """max of δ̇(s) over s ∈ [s_start, 1]: the ends, or the parabola's vertex inside."""
+    def peak(self, s_start):
+        """`(s, inside)`: the vertex of the parabola δ̇(s), and whether it is a maximum of δ̇
+        strictly inside (s_start, 1)."""
         vertex = -self.c1 / jnp.where(self.c2 < 0, 2.0 * self.c2, -1.0)
         inside = (self.c2 < 0) & (vertex > s_start) & (vertex < 1.0)
+        return jnp.clip(vertex, 0.0, 1.0), inside
+
+    def max_rate(self, s_start):
+        """max of δ̇(s) over s ∈ [s_start, 1]: the ends, or the parabola's vertex inside."""
+        vertex, inside = self.peak(s_start)
         ends = jnp.maximum(self.rate(s_start), self.rate(1.0))
-        return jnp.where(inside, jnp.maximum(ends, self.rate(jnp.clip(vertex, 0.0, 1.0))), ends)
+        return jnp.where(inside, jnp.maximum(ends, self.rate(vertex)), ends)
 
 
 class RevoluteClearance(AbstractElement):
@@ -219,6 +232,7 @@ class RevoluteClearance(AbstractElement):
             "impact_velocity": jnp.maximum(g.penetration_rate, 0.0),
             "penetration": g.penetration,
             "penetration_rate": g.penetration_rate,
+            "event_fraction": jnp.ones_like(g.penetration),
         }
 
     def memory_after_step(self, memory, kin: Kinematics, step):
@@ -248,12 +262,25 @@ class RevoluteClearance(AbstractElement):
         s_on = jnp.where(was_in, 0.0, path.crossing(onset))
         held = jnp.where(was_in, memory["impact_velocity"], 0.0)
         running_max = jnp.maximum(held, path.max_rate(s_on))
+        # Events that set v⁻ inside the step, for adaptive runs to end a step on
+        # (`event_fraction`): the onset, and an interior peak of δ̇ that raised v⁻ (a contact
+        # the mechanism keeps driving in).
+        s_peak, has_peak = path.peak(s_on)
+        raised = has_peak & (path.rate(s_peak) > jnp.maximum(held, path.rate(s_on)))
+        event = jnp.minimum(jnp.where(was_in, 1.0, s_on), jnp.where(raised, s_peak, 1.0))
         return {
             "in_contact": jnp.where(now_in, 1.0, 0.0),
             "impact_velocity": jnp.maximum(jnp.where(now_in, running_max, g.penetration_rate), 0.0),
             "penetration": g.penetration,
             "penetration_rate": g.penetration_rate,
+            "event_fraction": jnp.where(now_in, event, 1.0),
         }
+
+    def event_fraction(self, memory):
+        """Where in the last accepted step v⁻ was set — the contact's onset or an interior
+        peak of δ̇ that raised it — as a fraction of the step (≥ 1: neither happened);
+        `None` for laws without v⁻ memory."""
+        return memory["event_fraction"] if self.has_memory else None
 
     def side_forces(self, kin: Kinematics, memory):
         """`(F_N, F_T, geometry)` at state `kin`, each force an array `[near, far]` (both

@@ -71,6 +71,13 @@ class AbstractElement(eqx.Module):
         """Memory after an accepted step of length `step` (s) that ended at state `kin`."""
         return memory
 
+    def event_fraction(self, memory) -> Array | None:
+        """Where inside the last accepted step an event of this element's memory happened
+        (a clearance joint's contact onset), as the fraction s ∈ [0, 1) of the step; ≥ 1 when
+        none did. `None` (the default) for elements without locatable events. Adaptive runs
+        use it to end a step just past the event (`jaxdeploy.solvers.LocateEvents`)."""
+        return None
+
     def switched(self, before, after) -> Array:
         """Whether a step flipped one of the `switch_flags` of this element's memory."""
         flips = [jnp.any(before[key] != after[key]) for key in self.switch_flags]

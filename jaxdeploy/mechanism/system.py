@@ -209,6 +209,17 @@ class Mechanism(eqx.Module):
             for e, m in zip(self.elements, memory, strict=True)
         )
 
+    def event_fraction(self, memory):
+        """The earliest event inside the last accepted step, as a fraction of the step (≥ 1:
+        none), over the elements that locate events (`AbstractElement.event_fraction`);
+        `None` when no element does (then nothing is traced for it)."""
+        fractions = [
+            f
+            for e, m in zip(self.elements, memory, strict=True)
+            if e.has_memory and (f := e.event_fraction(m)) is not None
+        ]
+        return jnp.min(jnp.stack(fractions)) if fractions else None
+
     def switched(self, memory_before, memory_after):
         """Whether a step flipped any element's switch flag (`AbstractElement.switch_flags`)."""
         flips = [

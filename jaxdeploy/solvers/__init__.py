@@ -1,5 +1,6 @@
 """Time integrators for mechanisms."""
 
+from .event_location import LocateEvents
 from .generalized_alpha import (
     AlphaCoefficients,
     GeneralizedAlpha,
@@ -22,6 +23,7 @@ __all__ = [
     "GeneralizedAlpha",
     "GeneralizedAlphaState",
     "Index1Field",
+    "LocateEvents",
     "MechanismODESolver",
     "MechanismState",
     "MechanismTerm",
