@@ -115,3 +115,35 @@ def test_fastest_per_error_level_compares_ours_with_the_fastest_peer_that_reache
     assert table[3] == "| 1e-04 | ours exact x | 2 | peer x | 1 | 2 |"
     assert table[4] == "| 1e-06 | ours exact x | 2 | none reaches it | – | – |"
     assert table[5] == "| 1e-08 | none reaches it | – | none reaches it | – | – |"
+
+
+def test_budgeted_configurations_run_in_workers_and_one_over_budget_is_reported(tmp_path):
+    """`run_benchmark(..., budget_s=...)` (`--budget`): each configuration runs in a worker
+    process that loads the saved reference; one that does not finish within the budget is
+    killed and its row says so, and the run goes on with the next."""
+    import numpy as np
+
+    from jaxdeploy.benchmarks import work_precision as wp
+    from jaxdeploy.benchmarks.peers import SliderCrankNumpy
+    from jaxdeploy.benchmarks.reference import Reference
+    from jaxdeploy.scenes import SliderCrank
+
+    scene = SliderCrank()
+    p = scene.resolve_params(None)
+    s0 = scene.initial_state(p, scene.build(p))
+    ts = np.linspace(0.0, 0.3e-3, 31)
+    peer = SliderCrankNumpy(p).solve(s0, ts[-1], ts, "DOP853", 1e-10, 1e-12)
+    evidence = [dict(solver="numpy DOP853", rtol=1e-10, window=0.0, full=0.0, steps=0)]
+    reference = Reference(
+        "slider_crank", p, ts, peer.ys[:, :9], peer.ys[:, 9:], ts[-1], 1e-10, evidence
+    )
+    reference.save(str(tmp_path))
+    cfg = wp.Config("scipy DOP853 (numpy)", "rtol=1e-06", "scipy-numpy", "DOP853", 1e-6, 1e-9)
+    # Starting a worker (imports, building the mechanism) alone takes longer than 0.2 s.
+    late = wp._measure_in_worker("slider_crank", str(tmp_path), cfg, 1, 0.2)
+    assert late.status.startswith("over budget") and np.isnan(late.error_window)
+    row = wp._measure_in_worker("slider_crank", str(tmp_path), cfg, 1, 300.0)
+    assert row.status == "ok" and 0 < row.error_window < 1e-2 and row.steps > 0
+    assert row.peak_rss_mb > 0
+    with pytest.raises(ValueError, match="reference_folder"):
+        wp.run_benchmark("slider_crank", reference, budget_s=1.0)

@@ -45,7 +45,7 @@ def markdown_table(rows: list[Row]) -> str:
     for r in rows:
         lines.append(
             f"| {r.family} | {r.label} | {r.error_window:.2e} | {r.error_full:.2e} "
-            f"| {r.wall_s:.3g} | {r.compile_s:.3g} | {r.steps} "
+            f"| {r.wall_s:.3g} | {r.compile_s:.3g} | {r.steps if r.steps >= 0 else '–'} "
             f"| {r.rejected if r.rejected >= 0 else '–'} "
             f"| {r.newton_iterations if r.newton_iterations >= 0 else '–'} "
             f"| {r.peak_rss_mb:.0f} | {r.status} |"
