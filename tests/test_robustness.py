@@ -37,6 +37,17 @@ def test_failed_write_keeps_the_previous_file_and_leaves_no_temporary(tmp_path, 
     assert _leftovers(tmp_path) == []
 
 
+def test_a_result_gets_the_permissions_a_plain_write_would_give(tmp_path):
+    # The temporary file is created private (0600); the renamed result must not stay so.
+    import stat
+
+    plain = tmp_path / "plain.txt"
+    plain.write_text("x")
+    target = tmp_path / "summary.json"
+    io.atomic_write_json(str(target), {"run": 1})
+    assert stat.S_IMODE(target.stat().st_mode) == stat.S_IMODE(plain.stat().st_mode)
+
+
 def test_exception_inside_the_npz_writer_leaves_no_file(tmp_path, monkeypatch):
     target = tmp_path / "trajectory.npz"
 
