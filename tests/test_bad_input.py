@@ -237,3 +237,54 @@ def test_simulate_refuses_bad_step_control_before_compiling(options, name, monke
     mech = scene.build(params)
     with pytest.raises(ValueError, match=rf"^{name} = "):
         simulate(mech, scene.initial_state(params, mech), 0.1, **options)
+
+
+@pytest.fixture
+def nothing_compiled(monkeypatch):
+    """Fail the test if a refused command reaches a compiled solve (single run or batch)."""
+    import jaxdeploy.simulation
+    import jaxdeploy.sweep
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("a solver was compiled for input that should have been refused")
+
+    monkeypatch.setattr(jaxdeploy.simulation, "_solve", forbidden)
+    monkeypatch.setattr(jaxdeploy.sweep, "batch_function", forbidden)
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["sweep", "--scene", "deploy_arrray", "--grid", "restitution=0.5,0.9"],
+        ["optimize", "--scene", "deploy_arrray"],
+        ["fit", "data.csv", "--scene", "deploy_arrray", "--params", "restitution"],
+    ],
+)
+def test_every_command_refuses_an_unknown_scene_naming_the_valid_ones(
+    command, tmp_path, capsys, nothing_compiled
+):
+    out = tmp_path / "out"
+    command = [str(tmp_path / c) if c == "data.csv" else c for c in command]
+    assert main([*command, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "unknown scene 'deploy_arrray'" in err and "deploy_array" in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "grid, expected",
+    [
+        ("panel3_ra=1e-6,2e-6", ["unknown parameter 'panel3_ra'", "panel1_ra", "panel2_ra"]),
+        ("restitution=0.5,1.5", ["restitution = 1.5", "(0, 1]"]),
+        ("panel1_clearance=0,1e-5", ["panel1_clearance = 0.0", "(0, 0.01] m"]),
+    ],
+)
+def test_sweep_refuses_unknown_or_out_of_range_grid_values_before_compiling(
+    grid, expected, tmp_path, capsys, nothing_compiled
+):
+    out = tmp_path / "sweep"
+    code = main(["sweep", "--scene", "deploy_array", "--grid", grid, "--out", str(out), "--quiet"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert all(text in err for text in expected), err
+    assert not out.exists()
