@@ -145,27 +145,19 @@ def test_scalar_loss_gradient_is_the_jacobian_contracted():
 
 
 def test_impact_adaptive_steps_replayed_match_central_differences():
-    """Adaptive steps (the impact scene's default control): forward and reverse mode (two
-    checkpoint counts) of the replayed run agree with each other to round-off and with
-    central differences over the same steps."""
-    import diffrax as dfx
-
+    """Adaptive steps (the impact scene's default control): forward and reverse mode of the
+    replayed run agree with each other to round-off and with central differences over the
+    same steps. (Independence of the checkpoint count, the other symptom of re-decided steps,
+    is checked on a full slider-crank revolution in the slow test below.)"""
     scene, base, wrt, t_end, ts, output = _impact_case()
 
     fwd = parameter_jacobian(scene, base, wrt, output, t_end, mode="forward", ts=ts)
     rev = parameter_jacobian(scene, base, wrt, output, t_end, ts=ts)
-    rev_few = parameter_jacobian(
-        scene, base, wrt, output, t_end, ts=ts,
-        adjoint=dfx.RecursiveCheckpointAdjoint(checkpoints=5),
-    )  # fmt: skip
     fd = fit_central_differences(scene, base, wrt, output, t_end, 1e-4, ts=ts)
     for name in wrt:
         scale = np.abs(fd[name]).max()
         assert scale > 0, name
         np.testing.assert_allclose(rev[name], fwd[name], rtol=0, atol=1e-10 * scale, err_msg=name)
-        np.testing.assert_allclose(
-            rev_few[name], rev[name], rtol=0, atol=1e-10 * scale, err_msg=name
-        )
         np.testing.assert_allclose(rev[name], fd[name], rtol=0, atol=1e-5 * scale, err_msg=name)
 
 
@@ -225,6 +217,8 @@ def test_slider_crank_adaptive_matches_central_differences():
         np.testing.assert_allclose(rev[name], fd[name], rtol=0, atol=1e-4 * scale, err_msg=name)
 
 
+@pytest.mark.slow  # minutes of reverse-mode compilation; the default suite checks the Kvaerno
+# path's gradient against differences in test_diffrax_path.py (Kvaerno3, reverse mode).
 def test_impact_diffrax_path_kvaerno5_matches_central_differences():
     """The index-1 ODE path (`solver="kvaerno5"`, fixed step; its stage equations then solved
     to 1e-10/1e-12) through a rough, damped impact: reverse mode matches central
