@@ -147,3 +147,30 @@ def test_budgeted_configurations_run_in_workers_and_one_over_budget_is_reported(
     assert row.peak_rss_mb > 0
     with pytest.raises(ValueError, match="reference_folder"):
         wp.run_benchmark("slider_crank", reference, budget_s=1.0)
+
+
+def test_report_records_options_versions_and_seed_and_writes_atomically(tmp_path):
+    """The work–precision JSON says what produced it (issue 8, nothing lost)."""
+    import types
+
+    import numpy as np
+
+    from jaxdeploy.benchmarks.report import write_report
+    from jaxdeploy.benchmarks.work_precision import Row
+
+    reference = types.SimpleNamespace(
+        error_bound=(1e-9, 1e-8),
+        evidence=[dict(solver="dopri8", rtol=1e-11, window=1e-9, full=1e-8)],
+        ts=np.linspace(0.0, 0.1, 11),
+        window_end=0.05,
+        rtol=1e-12,
+        params={"clearance": 1e-4},
+    )
+    rows = [Row("ours", "rtol=1e-06", "jaxdeploy", 1e-5, 1e-4, 0.1, 1.0, 10, 1, 20, 100.0, "ok")]
+    options = dict(quick=True, repeats=1, t_end=None)
+    write_report(str(tmp_path), "slider_crank", reference, rows, options)
+    meta = json.loads((tmp_path / "work_precision.json").read_text())
+    assert meta["options"] == options and meta["reference"]["params"] == {"clearance": 1e-4}
+    assert "jax" in meta["versions"] and "diffrax" in meta["versions"]
+    assert "seed" in meta and meta["seed"] is None  # no random numbers drawn
+    assert not [p for p in os.listdir(tmp_path) if p.startswith(".tmp-")]

@@ -176,6 +176,7 @@ def write_report(out_dir: str, scene: str, reference, rows: list[Row], options: 
             ),
             machine=machine,
             rows=dicts,
+            seed=None,  # a benchmark draws no random numbers: options and versions define it
             versions=run_metadata(),
         ),
     )
