@@ -1,8 +1,9 @@
 """Property-based tests (hypothesis) of the contact laws over their whole valid domain.
 
-Domain (SI): K from steel-to-polymer pins, 1e7–1e12 N/m^1.5; σ 0–10 µm; penetration δ within
-±50 µm; offset s0 0–6; restitution c_e in (0, 1]; approach speeds 0–10 m/s; penetration rates
-±10 m/s; μ 0–0.8; sliding speeds ±10 m/s. Each property is checked against something that does
+Domain (SI), what the scenes accept (`ParamSpec` ranges) and beyond: K 1e5–1e14 N/m^1.5
+(E 1 MPa–10 TPa on mm pins); σ 0–125 µm (Ra ≤ 100 µm); penetration δ within ±500 µm; offset s0
+0–6; restitution c_e in (0, 1]; approach speeds 0–100 m/s; penetration rates ±100 m/s; μ 0–2;
+sliding speeds ±100 m/s; normal forces 0–1e9 N. Each property is checked against something that does
 not come from the code under test: an inequality of convex functions, a Taylor expansion of the
 Gaussian average, the fundamental theorem of calculus, a symmetry.
 """
@@ -18,14 +19,14 @@ from jaxdeploy import contact
 
 SETTINGS = settings(max_examples=30, deadline=None, derandomize=True)
 
-stiffness = st.floats(1e7, 1e12)
-sigma = st.one_of(st.just(0.0), st.floats(1e-9, 1e-5))
-delta = st.floats(-5e-5, 5e-5)
+stiffness = st.floats(1e5, 1e14)
+sigma = st.one_of(st.just(0.0), st.floats(1e-9, 1.25e-4))
+delta = st.floats(-5e-4, 5e-4)
 offset = st.floats(0.0, 6.0)
-restitution = st.floats(1e-3, 1.0)
-speed = st.floats(0.0, 10.0)
-rate = st.floats(-10.0, 10.0)
-mu = st.floats(0.0, 0.8)
+restitution = st.floats(1e-6, 1.0)
+speed = st.floats(0.0, 100.0)
+rate = st.floats(-100.0, 100.0)
+mu = st.floats(0.0, 2.0)
 N = 1.5  # the exponent used throughout; the laws take it as a static number
 
 
@@ -84,7 +85,7 @@ def test_gradients_finite_everywhere_and_energy_derivative_is_the_force(k, s, s0
 
 
 @SETTINGS
-@given(stiffness, st.floats(1e-9, 1e-5), delta)
+@given(stiffness, st.floats(1e-9, 1.25e-4), delta)
 def test_roughness_adds_force_jensen_and_tends_to_hertz(k, s, d):
     """For convex `x_+^n` (n ≥ 1), Jensen: `E[(δ + σZ)_+^n] ≥ δ_+^n`. Upper bound from
     `|a_+^n − b_+^n| ≤ n max(a, b)_+^(n−1) |a − b|` and subadditivity of `x^(n−1)` (n ≤ 2):
@@ -99,7 +100,7 @@ def test_roughness_adds_force_jensen_and_tends_to_hertz(k, s, d):
 
 
 @SETTINGS
-@given(stiffness, st.floats(1e-9, 1e-5), st.floats(8.0, 1e3))
+@given(stiffness, st.floats(1e-9, 1.25e-4), st.floats(8.0, 1e3))
 def test_deep_contact_matches_the_taylor_series_of_the_gaussian_average(k, s, depth):
     """`E[(δ + σZ)^n]/δ^n = Σ C(n,2j) E[Z^2j] ε^2j = 1 + C(n,2) ε² + 3 C(n,4) ε⁴ + 15 C(n,6) ε⁶
     + …`, `ε = σ/δ` (δ ≥ 8σ, where the series' next term, 105 C(n,8) ε⁸ ≈ 0.32 ε⁸, bounds the
@@ -115,7 +116,7 @@ def test_deep_contact_matches_the_taylor_series_of_the_gaussian_average(k, s, de
 
 
 @SETTINGS
-@given(stiffness, sigma, st.floats(0.0, 1e-5))
+@given(stiffness, sigma, st.floats(0.0, 1e-4))
 def test_offset_shifts_the_law_by_s0_sigma(k, s, d):
     """Clearance measured between peak tops (s0) = the mean-line law moved by s0 σ."""
     s0 = 3.0
@@ -196,7 +197,7 @@ def _friction(m, v, fn):
 
 
 @SETTINGS
-@given(mu, st.one_of(st.just(0.0), rate), st.floats(0.0, 1e5))
+@given(mu, st.one_of(st.just(0.0), rate), st.floats(0.0, 1e9))
 def test_friction_bounded_odd_opposes_sliding_with_finite_gradients(m, v, fn):
     for f, f_minus, *grads in _friction(m, v, fn):
         f, f_minus = float(f), float(f_minus)
@@ -209,7 +210,7 @@ def test_friction_bounded_odd_opposes_sliding_with_finite_gradients(m, v, fn):
 
 
 @SETTINGS
-@given(st.floats(1e-9, 1e-5), st.floats(1e-9, 1e-5))
+@given(st.floats(1e-9, 1.25e-4), st.floats(1e-9, 1.25e-4))
 def test_combined_roughness_is_a_norm_and_ra_round_trips(s1, s2):
     combined = float(contact.combine_sigma(s1, s2))
     assert max(s1, s2) <= combined <= s1 + s2
