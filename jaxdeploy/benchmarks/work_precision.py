@@ -120,7 +120,9 @@ def _own_and_scipy_configurations(scene_name: str, quick: bool) -> list[Config]:
     if scene_name == "slider_crank":
         steps, sub = [4e-6, 1e-6, 2.5e-7], [1e-6]
     else:
-        steps, sub = [4e-5, 1e-5], [1e-5]
+        # Fixed steps of 1e-5 s and longer fail at the lock (Newton diverges in the hinge
+        # contacts' stiff phase after the latch engages, t ≈ 0.54 s): one such row shows it.
+        steps, sub = [1e-5, 2.5e-6], [2.5e-6]
     for rho in (0.8, 0.5, 0.9):
         for h in steps if rho == 0.8 else sub:
             out.append(
