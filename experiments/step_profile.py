@@ -12,8 +12,9 @@ h = 1e-6, first 1.5 ms; deploy_array, h = 1e-4, first 0.2 s) and each Newton var
   formations per step;
 * the parts, each called 2000 times inside one compiled `lax.scan` with the mechanism passed
   as a traced argument (as in a real run: nothing constant-folded): the step residual r(z)
-  (forces and contact Q, constraints Φ, Φ_qᵀμ), the forces Q alone, the iteration matrix (n
-  forward-mode directions), its factorisation and one solve with the factors;
+  (forces and contact Q, constraints Φ, Φ_qᵀμ), the forces Q alone, the iteration matrix
+  (`StepSystem.iteration_matrix`: compressed forward-mode derivatives), its factorisation
+  and one solve with the factors;
 * diffrax's loop: the same `simulate` with a solver whose step does no work.
 
 The breakdown per step is `iterations × (residual + solve) + formations × (matrix +
@@ -142,33 +143,27 @@ def parts(repeats, calls=2000) -> dict:
     return out
 
 
-def _case_parts(scene_name, ideal, dt, repeats, calls) -> dict:
+def _case_parts(scene_name, ideal, dt, repeats, calls, batch=None) -> dict:
+    """µs of CPU per call of each part, for one case; with `batch`, per case of a vmapped
+    group of `batch` identical cases (the batch's cost divided by `batch`)."""
     import jax
     import jax.numpy as jnp
 
-    from jaxdeploy.solvers.generalized_alpha import _apply_factor, _factor
+    from jaxdeploy.solvers.generalized_alpha import StepSystem, _apply_factor, _factor
 
     _, mech, s0 = _setup(scene_name, ideal)
     n = s0.q.shape[0]
     memory = mech.memory_for_step(s0.memory, s0.q, s0.v)
     beta_p = 1.0 / dt**2
 
+    def system(mech):
+        return StepSystem(mech, s0.q, s0.v, 1.0 / dt, beta_p, 0.0, memory)
+
     def residual(mech, x):
-        u, mu = x[:n], x[n:]
-        q = s0.q + u
-        v = s0.v + u / dt
-        dynamic = mech.mass_diagonal() * u - mech.generalized_forces(q, v, 0.0, memory) / beta_p
-        if mech.n_constraints:
-            dynamic = dynamic + mech.constraint_jacobian_transpose_product(q, 0.0, mu)
-        return jnp.concatenate([dynamic, mech.constraints(q, 0.0)])
+        return jnp.concatenate(system(mech).residual((x[:n], x[n:])))
 
     def matrix(mech, x):
-        columns = jax.jacfwd(lambda w: residual(mech, jnp.concatenate([w, x[n:]])))(x[:n])
-        phi_q = columns[n:]
-        m = phi_q.shape[0]
-        return jnp.concatenate(
-            [columns, jnp.concatenate([phi_q.T, jnp.zeros((m, m), x.dtype)])], axis=1
-        )
+        return system(mech).iteration_matrix(x)
 
     x0 = jnp.concatenate([jnp.zeros_like(s0.q), s0.lam / beta_p])
     factors = _factor(matrix(mech, x0))
@@ -178,22 +173,27 @@ def _case_parts(scene_name, ideal, dt, repeats, calls) -> dict:
             s0.q + x[:n], s0.v, 0.0, memory
         ),
         "iteration matrix": matrix,
-        "factorisation": lambda mech, x: _factor(matrix(mech, x0) + x[0])[0],
+        "factorisation": lambda mech, x: _factor(matrix(mech, x))[0],
         "solve with factors": lambda mech, x: _apply_factor(*factors, x),
     }
+    size = 1 if batch is None else batch
+    z0 = x0 if batch is None else jnp.tile(x0, (batch, 1))
     out = {}
     for name, fn in pieces.items():
+        each = fn if batch is None else jax.vmap(fn, in_axes=(None, 0))
 
         @jax.jit
-        def loop(mech, z, fn=fn):
+        def loop(mech, z, each=each):
             def body(c, _):
-                r = fn(mech, c)
-                return c + 1e-30 * jnp.sum(r), None
+                # A nonlinear use of every output entry: with a plain sum XLA folds linear
+                # work (e.g. forward derivatives along constant directions) into the sum.
+                r = each(mech, c)
+                return c + 1e-30 * jnp.sum(r * r), None
 
             return jax.lax.scan(body, z, None, length=calls)[0]
 
-        _, cpu = _cpu(lambda loop=loop: jax.block_until_ready(loop(mech, x0)), repeats)
-        out[name] = cpu / calls * 1e6
+        _, cpu = _cpu(lambda loop=loop: jax.block_until_ready(loop(mech, z0)), repeats)
+        out[name] = cpu / calls / size * 1e6
     # The factorisation row above includes forming the matrix: report it alone.
     out["factorisation"] -= out["iteration matrix"]
     out["size"] = int(x0.shape[0])

@@ -141,11 +141,30 @@ def test_rough_onset_near_s0_minus_three_sigma(offset):
 
 
 def test_rough_stiffness_is_force_gradient():
+    # Against autodiff through the force's own quadrature (`quadrature_force`), which is
+    # independent of `stiffness`; `force` itself is differentiated by `stiffness`.
     law = RoughElastic(K, SIGMA, offset=1.0)
     d = jnp.linspace(-6 * SIGMA, 40 * SIGMA, 97)
     np.testing.assert_allclose(
-        jax.vmap(jax.grad(law.force))(d), law.stiffness(d), rtol=1e-10, atol=1e-6
+        jax.vmap(jax.grad(law.quadrature_force))(d), law.stiffness(d), rtol=1e-10, atol=1e-6
     )
+
+
+def test_rough_force_custom_derivative_matches_the_quadrature():
+    """`force`'s custom JVP (closed-form stiffness in δ, quadrature in the law's parameters)
+    equals autodiff of the quadrature, first and second order, in δ and in σ, K, s0."""
+
+    def force(params, delta, quadrature):
+        law = RoughElastic(params[0], params[1], offset=params[2])
+        return law.quadrature_force(delta) if quadrature else law.force(delta)
+
+    params = jnp.array([K, SIGMA, 0.7])
+    for delta in (-4.0 * SIGMA, -1.0 * SIGMA, 0.5 * SIGMA, 12.0 * SIGMA):
+        for fn in (jax.grad, jax.hessian):
+            got = fn(force, argnums=(0, 1))(params, delta, False)
+            want = fn(force, argnums=(0, 1))(params, delta, True)
+            for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want), strict=True):
+                np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12 * np.max(np.abs(b)))
 
 
 def _force(delta, sigma, k=K, offset=0.5):

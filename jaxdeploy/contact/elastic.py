@@ -16,8 +16,10 @@ from __future__ import annotations
 import abc
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jax import Array
+from jax.custom_derivatives import SymbolicZero
 from jax.typing import ArrayLike
 
 from .._validation import check_nonnegative, check_positive, check_range
@@ -157,7 +159,15 @@ class RoughElastic(AbstractElasticLaw):
         return jnp.asarray(delta, dtype=float) - self.offset * self.sigma
 
     def force(self, delta: ArrayLike) -> Array:
-        """`F_e = K σ^n F_n(s0 − δ/σ)` (N); `K (δ)_+^n` at σ = 0."""
+        """`F_e = K σ^n F_n(s0 − δ/σ)` (N); `K (δ)_+^n` at σ = 0.
+
+        Differentiated in δ by the closed form `stiffness` (`_rough_force`), not through
+        the quadrature."""
+        return _rough_force(self, jnp.asarray(delta, dtype=float))
+
+    def quadrature_force(self, delta: ArrayLike) -> Array:
+        """`force` without its custom derivative: JAX differentiates the quadrature itself
+        (the independent check of `stiffness` and of the custom rule)."""
         x = self._interference(delta)
         return self.stiffness_coefficient * gaussian_smoothed_power(x, self.sigma, self.exponent)
 
@@ -181,3 +191,38 @@ class RoughElastic(AbstractElasticLaw):
     def onset_penetration(self) -> Array:
         """`(s0 − 3) σ`: below it the force is < ~1e-4 of its value one σ deeper."""
         return (self.offset - ONSET_SIGMAS) * self.sigma
+
+
+@jax.custom_jvp
+def _rough_force(law: RoughElastic, delta):
+    return law.quadrature_force(delta)
+
+
+def _rough_force_jvp(primals, tangents):
+    """`dF_e = k_d(δ) dδ + (∂F_e/∂law) dlaw`, elementwise in δ.
+
+    Forward-mode derivatives along many directions of δ at once (the iteration matrix of an
+    implicit step: one direction per coordinate group) would otherwise push each direction
+    through the 64-node quadrature; here the quadrature of `k_d` (`stiffness`, the same rule
+    of order n − 1) is evaluated once and each direction costs one product. The law's own
+    parameters (K, σ, s0; e.g. gradients in Ra) are differentiated through the quadrature as
+    before, and skipped when their tangents are symbolically zero (as in the iteration
+    matrix)."""
+    law, delta = primals
+    law_dot, delta_dot = tangents
+    force = law.quadrature_force(delta)
+    tangent = jnp.zeros_like(force)
+    if not isinstance(delta_dot, SymbolicZero):
+        tangent = tangent + law.stiffness(delta) * delta_dot
+    law_leaves = jax.tree_util.tree_leaves(law_dot, is_leaf=lambda x: isinstance(x, SymbolicZero))
+    if not all(isinstance(leaf, SymbolicZero) for leaf in law_leaves):
+        law_dot = jax.tree_util.tree_map(
+            lambda t: jnp.zeros(t.shape, t.dtype) if isinstance(t, SymbolicZero) else t,
+            law_dot,
+            is_leaf=lambda x: isinstance(x, SymbolicZero),
+        )
+        tangent = tangent + jax.jvp(lambda m: m.quadrature_force(delta), (law,), (law_dot,))[1]
+    return force, tangent
+
+
+_rough_force.defjvp(_rough_force_jvp, symbolic_zeros=True)

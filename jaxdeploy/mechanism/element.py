@@ -60,6 +60,18 @@ class AbstractElement(eqx.Module):
         """Names of the bodies this element touches (for validation)."""
         return ()
 
+    def coupled_bodies(self) -> tuple[str, ...] | None:
+        """The bodies whose coordinates and velocities this element's constraints and forces
+        depend on; the state-dependent forces act on these bodies only. The implicit solvers'
+        iteration matrix is sparse accordingly (`Mechanism.jacobian_patterns`). `None`: not
+        declared, every body is assumed. Default: `bodies()`, or `None` if that is empty."""
+        return self.bodies() or None
+
+    @property
+    def has_forces(self) -> bool:
+        """Whether this element's class provides forces (overrides `wrenches`)."""
+        return type(self).wrenches is not AbstractElement.wrenches
+
     def init_memory(self, kin: Kinematics):
         return None
 

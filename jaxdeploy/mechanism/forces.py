@@ -28,6 +28,10 @@ class Gravity(AbstractElement):
     def wrenches(self, kin: Kinematics, t, memory):
         return [Wrench(body=b.name, force=b.mass * self.acceleration) for b in kin.mechanism.bodies]
 
+    def coupled_bodies(self):
+        # Constant forces: they depend on no coordinate, so the iteration matrix has no term.
+        return ()
+
     def potential_energy(self, kin: Kinematics, memory):
         """`V = −Σ m_k g·r_k`."""
         g = jnp.asarray(self.acceleration)

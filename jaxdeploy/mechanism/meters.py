@@ -67,6 +67,9 @@ class EnergyMeter(AbstractElement):
     def bodies(self):
         return self.inner.bodies()
 
+    def coupled_bodies(self):
+        return self.inner.coupled_bodies()
+
     def wrenches(self, kin: Kinematics, t, memory):
         return self.inner.wrenches(kin, t, memory["inner"])
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array
 
 from .bodies import GROUND, Body, Kinematics, cross
@@ -187,6 +188,41 @@ class Mechanism(eqx.Module):
         if not per_body:
             return jnp.zeros_like(q)
         return jnp.concatenate(per_body)
+
+    # --- sparsity of the step residual ----------------------------------------------------------
+
+    def _coupled_coordinates(self, element) -> np.ndarray:
+        """Coordinate indices of the bodies `element` couples (all, if it does not say)."""
+        names = element.coupled_bodies()
+        if names is None:
+            return np.arange(self.n_coordinates)
+        indices = [self.body_index(b) for b in names if b != GROUND]
+        return np.array([3 * k + i for k in indices for i in range(3)], dtype=int)
+
+    def jacobian_patterns(self) -> tuple[np.ndarray, np.ndarray]:
+        """Static sparsity of the Jacobians, with respect to q (or q̇), of
+
+        * the constraint terms `[Φ_qᵀ μ; Φ]` ((n + m) × n): each constraining element's rows
+          (its share of Φ_qᵀ μ on its bodies, and its own Φ rows) depend only on the
+          coordinates of the bodies it couples (`AbstractElement.coupled_bodies`);
+        * the forces `Q` (n × n): each force element's forces depend on, and act on, the
+          bodies it couples.
+
+        Boolean numpy arrays, from the topology alone (trace time).
+        """
+        n, m = self.n_coordinates, self.n_constraints
+        constraint = np.zeros((n + m, n), dtype=bool)
+        force = np.zeros((n, n), dtype=bool)
+        row = n
+        for element in self.elements:
+            coords = self._coupled_coordinates(element)
+            if element.n_constraints:
+                constraint[np.ix_(coords, coords)] = True
+                constraint[row : row + element.n_constraints, coords] = True
+                row += element.n_constraints
+            if element.has_forces:
+                force[np.ix_(coords, coords)] = True
+        return constraint, force
 
     # --- memory (state that changes between steps only) ---------------------------------------
 

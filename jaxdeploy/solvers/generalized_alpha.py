@@ -20,8 +20,9 @@ multiplier `μ = λ/β'`, `β' = (1 − α_m)/(h² β (1 − α_f))`, `γ' = γ/
 This is Arnold & Brüls' Algorithm 1 with both the dynamic rows divided by β' and λ rescaled, so
 the iteration matrix `[[M + (K_t + γ' C_t)/β', Φ_qᵀ], [Φ_q, 0]]` stays O(1) as h → 0 (Bottasso,
 Bauchau & Cardona 2007 scaling; LITERATURE §2.4). The iteration matrix comes from JAX
-derivatives (n forward-mode directions); by default it is factorised once and reused across
-iterations and steps until convergence slows (modified Newton, see `GeneralizedAlpha`). The
+forward-mode derivatives, compressed along the mechanism's sparsity (`StepSystem`); by default
+it is factorised once and reused across iterations and steps until convergence slows
+(modified Newton, see `GeneralizedAlpha`). The
 converged solve is differentiated by the implicit-function theorem (`lax.custom_root`) with the
 exact Jacobian, never by unrolling the iterations.
 
@@ -44,6 +45,7 @@ import jax
 import jax.flatten_util
 import jax.numpy as jnp
 
+from ..mechanism.sparsity import compressed_jacobian
 from .term import MechanismState, MechanismTerm
 
 
@@ -136,6 +138,77 @@ def _run_if(pred, fn, operand):
     return jax.lax.while_loop(lambda carry: carry[0], body, (pred, operand))[1]
 
 
+class StepSystem(NamedTuple):
+    """The nonlinear system of one step, in the correction `u` and scaled multipliers `μ`:
+
+        r(u, μ) = [ M u + Φ_q(q)ᵀ μ − Q(q, q̂̇ + γ' u, t)/β' ;  Φ(q, t) ],   q = q̂ + u
+
+    (module docstring), and its iteration matrix ∂r/∂(u, μ)."""
+
+    mechanism: object
+    q_hat: jax.Array
+    v_hat: jax.Array
+    gamma_p: jax.Array
+    beta_p: jax.Array
+    t: jax.Array
+    memory: object
+
+    def _constraint_terms(self, u, mu):
+        """`[Φ_q(q)ᵀ μ; Φ(q)]` at `q = q̂ + u`."""
+        mech, q = self.mechanism, self.q_hat + u
+        if not mech.n_constraints:
+            return jnp.zeros_like(u)
+        return jnp.concatenate(
+            [mech.constraint_jacobian_transpose_product(q, self.t, mu), mech.constraints(q, self.t)]
+        )
+
+    def _scaled_forces(self, u):
+        """`Q(q̂ + u, q̂̇ + γ' u, t)/β'`."""
+        q, v = self.q_hat + u, self.v_hat + self.gamma_p * u
+        return self.mechanism.generalized_forces(q, v, self.t, self.memory) / self.beta_p
+
+    def residual(self, z):
+        u, mu = z
+        mech = self.mechanism
+        dynamic = mech.mass_diagonal() * u - self._scaled_forces(u)
+        if mech.n_constraints:
+            dynamic = dynamic + mech.constraint_jacobian_transpose_product(
+                self.q_hat + u, self.t, mu
+            )
+        return dynamic, mech.constraints(self.q_hat + u, self.t)
+
+    def iteration_matrix(self, x):
+        """∂r/∂(u, μ) at the flat iterate `x = (u, μ)`:
+
+            [[M + (Φ_qᵀ μ)_q − Q_u/β',  Φ_qᵀ], [Φ_q, 0]],   Q_u = K + γ' C
+
+        The u columns come from compressed forward-mode derivatives
+        (`jaxdeploy.mechanism.sparsity`) along the mechanism's static sparsity
+        (`Mechanism.jacobian_patterns`), separately for the constraint terms (kinematics only)
+        and the forces (where the contact laws are, and only the bodies of force elements
+        need a direction); the μ columns are [Φ_qᵀ; 0], read off the constraint rows (r is
+        linear in μ). Equal to the dense Jacobian of `residual` (tested)."""
+        mech = self.mechanism
+        n = self.q_hat.shape[0]
+        u, mu = x[:n], x[n:]
+        constraint_pattern, force_pattern = mech.jacobian_patterns()
+        forces_u = compressed_jacobian(self._scaled_forces, u, force_pattern)
+        dynamic_u = jnp.diag(mech.mass_diagonal()) - forces_u
+        if not mech.n_constraints:
+            return dynamic_u
+        terms_u = compressed_jacobian(
+            lambda w: self._constraint_terms(w, mu), u, constraint_pattern
+        )
+        phi_q = terms_u[n:]
+        m = phi_q.shape[0]
+        return jnp.concatenate(
+            [
+                jnp.concatenate([dynamic_u + terms_u[:n], phi_q.T], axis=1),
+                jnp.concatenate([phi_q, jnp.zeros((m, m), dtype=x.dtype)], axis=1),
+            ]
+        )
+
+
 def _mechanism_of(terms):
     # diffeqsolve wraps terms (e.g. in a WrapTerm that handles the direction of time).
     while not isinstance(terms, MechanismTerm):
@@ -172,8 +245,9 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
       second order).
 
     The iteration matrix `[[M + (K + γ' C)/β' + (Φ_qᵀ μ)_q, Φ_qᵀ], [Φ_q, 0]]` is formed by
-    forward-mode derivatives of the residual along the n coordinate directions only: the μ
-    columns are `[Φ_qᵀ; 0]`, read off the constraint rows. Whichever `newton` is used, the
+    `StepSystem.iteration_matrix`: compressed forward-mode derivatives of the constraint terms
+    and of the forces along the mechanism's static sparsity; the μ columns `[Φ_qᵀ; 0]` are
+    read off the constraint rows. Whichever `newton` is used, the
     converged solve is differentiated by the implicit-function theorem with the exact
     Jacobian (`lax.custom_root`), so derivatives do not depend on the iteration.
 
@@ -246,29 +320,11 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
         v_hat = v0 + h * (1.0 - cf.gamma) * a0 + h * cf.gamma * a_pred
         beta_p = (1.0 - cf.alpha_m) / (h**2 * cf.beta * (1.0 - cf.alpha_f))
         gamma_p = cf.gamma / (h * cf.beta)
-        mass = mech.mass_diagonal()
-        mass_unit = jnp.mean(mass)
+        mass_unit = jnp.mean(mech.mass_diagonal())
 
-        def residual(z):
-            u, mu = z
-            q = q_hat + u
-            v = v_hat + gamma_p * u
-            forces = mech.generalized_forces(q, v, t1, memory)
-            dynamic = mass * u - forces / beta_p
-            if mech.n_constraints:
-                dynamic = dynamic + mech.constraint_jacobian_transpose_product(q, t1, mu)
-            return dynamic, mech.constraints(q, t1)
-
-        def iteration_matrix(x):
-            """∂r/∂(u, μ) at the flat iterate `x`: n forward-mode directions for the u
-            columns; the μ columns are [Φ_qᵀ; 0] (r is linear in μ)."""
-            u, mu = x[:n], x[n:]
-            columns_u = jax.jacfwd(lambda w: jnp.concatenate(residual((w, mu))))(u)
-            phi_q = columns_u[n:]
-            columns_mu = jnp.concatenate(
-                [phi_q.T, jnp.zeros((phi_q.shape[0], phi_q.shape[0]), dtype=x.dtype)]
-            )
-            return jnp.concatenate([columns_u, columns_mu], axis=1)
+        step_system = StepSystem(mech, q_hat, v_hat, gamma_p, beta_p, t1, memory)
+        residual = step_system.residual
+        iteration_matrix = step_system.iteration_matrix
 
         full = self.newton == "full"
         factors_prev = jax.lax.stop_gradient(
