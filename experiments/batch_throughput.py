@@ -9,10 +9,12 @@ The B cases scatter the varied parameters around the scene's defaults (deploy_ar
 panel2_ra, panel1_clearance, panel2_clearance), x_i = x0 e^{s ξ_i}, ξ_i ~ N(0, 1) seeded, s =
 `--spread` (default 0.1: the manufacturing-scatter use case of robust design), so the batch is
 not one case repeated. A batch advances until its slowest case ends, so a wide spread (cases of
-very different stiffness) costs more per case; `--spread 1` shows it. A single run is timed on
-the first case. Times are wall-clock medians over `--repeats` interleaved calls of the
-compiled programs (single, batch, single, ...); the ratio, not the absolute time, is the
-result (the machine is shared).
+very different stiffness) costs more per case; `--spread 1` shows it. One simulation's cost is
+the mean over the same B cases each run alone, one after another (the same work as the batch,
+and as long, so that both see the shared machine's load alike; timing one short run against a
+long batch let the scheduler favour one or the other by tens of percent). Times are medians
+over `--repeats` interleaved calls of the compiled programs (singles, batch, singles, ...);
+the ratio, not the absolute time, is the result (the machine is shared).
 
 The B cases are run two ways, each timed against the single run in the same interleaved
 loop: `plain`, one vmap over all B with the default solver; and `grouped`, the batch policy
@@ -52,6 +54,18 @@ def cases(scene, batch, spread, seed):
         name: defaults[name] * np.exp(spread * rng.standard_normal(batch))
         for name in VARIED[scene.name]
     }
+
+
+def time_one_by_one(program, cases):
+    """Every case alone, one after another: `(wall s, CPU s, steps per case, cases ok)`,
+    the times per case."""
+    start, start_cpu = time.perf_counter(), time.process_time()
+    outs = [program(case) for case in cases]
+    jax.block_until_ready(outs)
+    wall, cpu = time.perf_counter() - start, time.process_time() - start_cpu
+    steps = np.concatenate([np.asarray(o.stats["num_accepted_steps"]) for o in outs])
+    ok = sum(int(np.sum(np.asarray(o.result._value) == 0)) for o in outs)
+    return wall / len(cases), cpu / len(cases), steps, ok
 
 
 def timed(fn, args):
@@ -102,8 +116,17 @@ def main(argv=None):
         solver=GeneralizedAlpha(newton=args.newton),
     )
     stacked = tuple(jnp.asarray(table[k]) for k in varied)
-    one = tuple(v[:1] for v in stacked)  # the default program at batch size 1
-    variants = {"single": (run, one), "grouped": (grouped, stacked)}
+    # The default program at batch size 1, run on each case in turn.
+    singles = [tuple(v[i : i + 1] for v in stacked) for i in range(args.batch)]
+    # The grouped policy's solver alone: how much of the gain is the batch, how much the solver.
+    run_same = batch_function(
+        scene, varied, shared, args.t_end, ts, solver=GeneralizedAlpha(newton=args.newton)
+    )
+    variants = {
+        "single": (run, singles[0]),
+        "single_same": (run_same, singles[0]),
+        "grouped": (grouped, stacked),
+    }
     if not args.skip_plain:
         variants["batch"] = (run, stacked)
 
@@ -128,20 +151,28 @@ def main(argv=None):
     cpus = {label: [] for label in variants}
     for _ in range(args.repeats):
         for label, (_, inputs) in variants.items():
-            wall, cpu, trajectory = timed(compiled[label], inputs)
+            if label.startswith("single"):
+                wall, cpu, steps, ok = time_one_by_one(compiled[label], singles)
+            else:
+                wall, cpu, trajectory = timed(compiled[label], inputs)
+                steps = np.asarray(trajectory.stats["num_accepted_steps"])
+                ok = int(np.sum(np.asarray(trajectory.result._value) == 0))
             walls[label].append(wall)
             cpus[label].append(cpu)
-            steps = np.asarray(trajectory.stats["num_accepted_steps"])
             result[f"{label}_steps_max"] = int(steps.max())
             result[f"{label}_steps_mean"] = float(steps.mean())
-            result[f"{label}_ok"] = int(np.sum(np.asarray(trajectory.result._value) == 0))
-            print(f"{label}: {wall:.3f} s for {len(inputs[0])} case(s)", flush=True)
+            result[f"{label}_ok"] = ok
+            each = " per case, each alone" if label.startswith("single") else ""
+            print(f"{label}: {wall:.3f} s{each} ({args.batch} cases)", flush=True)
     for label in walls:
         result[f"{label}_wall_s"] = float(np.median(walls[label]))
         result[f"{label}_walls_s"] = walls[label]
         result[f"{label}_cpu_s"] = float(np.median(cpus[label]))
     for label in walls:
-        if label != "single":
+        if label == "single_same":
+            result["single_same_speedup"] = result["single_wall_s"] / result["single_same_wall_s"]
+            result["single_same_cpu_speedup"] = result["single_cpu_s"] / result["single_same_cpu_s"]
+        elif label != "single":
             per_case = result[f"{label}_wall_s"] / args.batch
             result[f"{label}_per_case_s"] = per_case
             result[f"{label}_speedup_per_case"] = result["single_wall_s"] / per_case
@@ -149,6 +180,13 @@ def main(argv=None):
                 result[f"{label}_cpu_s"] / args.batch
             )
     result["speedup_per_case"] = result["grouped_speedup_per_case"]
+    # The grouped batch against its own solver run alone.
+    result["grouped_vs_same_solver"] = (
+        result["single_same_wall_s"] * args.batch / result["grouped_wall_s"]
+    )
+    result["grouped_vs_same_solver_cpu"] = (
+        result["single_same_cpu_s"] * args.batch / result["grouped_cpu_s"]
+    )
     # Where a Newton iteration's time goes, per case: alone and in a vmapped group.
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     from step_profile import _case_parts
@@ -163,7 +201,7 @@ def main(argv=None):
     result["jaxdeploy_version"] = jaxdeploy.__version__
     result["argv"] = sys.argv[1:] if argv is None else list(argv)
     for label in walls:
-        if label != "single":
+        if not label.startswith("single"):
             print(
                 f"{args.scene}, t_end {args.t_end} s: one run {result['single_wall_s']:.3f} s; "
                 f"{label} batch of {args.batch} {result[f'{label}_wall_s']:.2f} s = "
@@ -184,6 +222,10 @@ def row(label, cases, wall, steps, compile_s, speedup="") -> str:
     )
 
 
+def _steps(r, label) -> str:
+    return f"{r[f'{label}_steps_mean']:.1f} ({r[f'{label}_steps_max']})"
+
+
 def page(r, argv) -> str:
     argv = sys.argv[1:] if argv is None else argv
     command = "PYTHONPATH=. python experiments/batch_throughput.py " + " ".join(argv)
@@ -191,13 +233,21 @@ def page(r, argv) -> str:
     g, newton = r["group_size"], r["newton"]
     rows = [
         row(
-            "one simulation (default solver)",
-            1,
-            r["single_wall_s"],
-            r["single_steps_max"],
+            "each case alone, one after another (default solver)",
+            r["batch"],
+            r["single_wall_s"] * r["batch"],
+            _steps(r, "single"),
             r["single_compile_s"],
             "1",
-        )
+        ),
+        row(
+            f'each case alone, one after another, `newton="{newton}"`',
+            r["batch"],
+            r["single_same_wall_s"] * r["batch"],
+            _steps(r, "single_same"),
+            r["single_same_compile_s"],
+            f"{r['single_same_speedup']:.2f} ({r['single_same_cpu_speedup']:.2f})",
+        ),
     ]
     if "batch_wall_s" in r:
         rows.append(
@@ -205,7 +255,7 @@ def page(r, argv) -> str:
                 "one vmap over all cases (default solver)",
                 r["batch"],
                 r["batch_wall_s"],
-                r["batch_steps_max"],
+                _steps(r, "batch"),
                 r["batch_compile_s"],
                 f"{r['batch_speedup_per_case']:.2f} ({r['batch_cpu_speedup_per_case']:.2f})",
             )
@@ -215,7 +265,7 @@ def page(r, argv) -> str:
             f'vmapped groups of {g}, one after another, `newton="{newton}"`',
             r["batch"],
             r["grouped_wall_s"],
-            r["grouped_steps_max"],
+            _steps(r, "grouped"),
             r["grouped_compile_s"],
             f"**{r['grouped_speedup_per_case']:.2f}** ({r['grouped_cpu_speedup_per_case']:.2f})",
         )
@@ -230,12 +280,15 @@ the timings, taken side by side (interleaved) in one run, are meaningful.*
 Scene `{r["scene"]}` to t = {r["t_end"]} s with its default adaptive step control; the batch
 varies {", ".join(r["varied"])} by a log-normal spread s = {r["spread"]} around the defaults
 (seed {r["seed"]}). Every program is compiled ahead of time
-(`jit(...).lower(...).compile()`), and the timings exclude compilation. *Speed-up* is the single
-run's wall time over the batch's wall time per case (target ≥ 2); in brackets the same ratio
-of the process's CPU time, which other users' jobs disturb less (XLA may run a batch's larger
-operations on both cores, so this ratio also says what a batch costs in core-seconds).
+(`jit(...).lower(...).compile()`), and the timings exclude compilation. One simulation's cost
+is the mean over the same cases each run alone, one after another (the first row: the same
+work as the batch, over a similar time, so that both see this shared machine's load alike).
+*Speed-up* is that wall time per case over the batch's wall time per case (target ≥ 2); in
+brackets the same ratio of the process's CPU time, which other users' jobs disturb less (XLA
+may run a batch's larger operations on both cores, so this ratio also says what a batch costs
+in core-seconds).
 
-| | cases | wall time [s] | per case [s] | speed-up per case | accepted steps (max) | compile [s] |
+| | cases | wall [s] | per case [s] | speed-up per case | steps per case: mean (max) | compile [s] |
 |---|---|---|---|---|---|---|
 {table}
 
@@ -255,18 +308,30 @@ case, each part called 500 times in one compiled loop):
 |---|---|---|---|
 {_parts_table(r)}
 
-Groups of {g} with Newton proper (`newton="full"`: a matrix at every iteration, no
-batch-wide refresh triggered by one case) waste the least: each group
-stops at its own slowest case, and its arrays stay in cache. What made Newton proper cheap
-enough for that is the iteration matrix (`GeneralizedAlpha`'s `StepSystem.iteration_matrix`):
-it is built from compressed forward-mode derivatives along the mechanism's sparsity
-(`jaxdeploy.mechanism.sparsity`; for deploy_array 6 directions through the forces instead of
-21, 12 through the constraint terms), and the rough contact law is differentiated by its
-closed-form stiffness instead of pushing every direction through its 64-node quadrature
-(`RoughElastic.force`). The factorisation and the triangular solves are LAPACK calls made once
-per case, so they cost per case in a group about what they cost alone: they are what a batch
-cannot shrink.
+Groups of {g} with Newton proper (`newton="{newton}"`: a matrix at every iteration, no
+batch-wide refresh triggered by one case) waste the least: each group stops at its own slowest
+case, and its arrays stay in cache. How much of the gain is the solver rather than the batch:
+run alone, Newton proper takes {r["single_same_steps_mean"]:.1f} accepted steps per case here
+against {r["single_steps_mean"]:.1f} with modified Newton, at
+{1 / r["single_same_speedup"]:.2f}× the default's wall time per case (second row); against
+that same solver run alone, the groups are
+**{r["grouped_vs_same_solver"]:.2f}×** cheaper per
+case ({r["grouped_vs_same_solver_cpu"]:.2f}× in CPU time). What made Newton proper cheap enough
+for groups is the iteration matrix (`StepSystem.iteration_matrix` in
+`jaxdeploy.solvers.generalized_alpha`): it is built from compressed forward-mode derivatives
+along the mechanism's sparsity (`jaxdeploy.mechanism.sparsity`; for deploy_array 6 directions
+through the forces instead of 21, 12 through the constraint terms), and the rough contact law
+is differentiated by its closed-form stiffness instead of pushing every direction through its
+64-node quadrature (`RoughElastic.force`). In a group, the {_largest_parts(r)} are still the
+largest parts of an iteration per case (table).
 """
+
+
+def _largest_parts(r) -> str:
+    group = r["parts_group"]
+    names = ("residual r(z)", "iteration matrix", "factorisation", "solve with factors")
+    first, second = sorted(names, key=lambda k: -group[k])[:2]
+    return f"{first} and {second}"
 
 
 def _parts_table(r) -> str:
@@ -282,9 +347,25 @@ def _parts_table(r) -> str:
 def _verdict(r) -> str:
     wall, cpu = r["grouped_speedup_per_case"], r["grouped_cpu_speedup_per_case"]
     if wall >= 2 and cpu >= 2:
+        same, same_cpu = r["grouped_vs_same_solver"], r["grouped_vs_same_solver_cpu"]
+        solver_alone = r["single_same_speedup"]
         return (
-            f"The target (≥ 2× cheaper per simulation) is met: {wall:.2f}× "
-            f"({cpu:.2f}× in CPU time)."
+            "The target (≥ 2× cheaper per simulation than one simulation with the default "
+            f"solver) is met: **{wall:.2f}×** ({cpu:.2f}× in CPU time). **But against one "
+            f'simulation with the batch\'s own solver (`newton="{r["newton"]}"`, second row) '
+            f"the groups are {same:.2f}× cheaper ({same_cpu:.2f}× in CPU time)**: the rest of "
+            f"the gain is the solver, which alone costs {1 / solver_alone:.2f}× the default's "
+            "wall time per case on this scene. Measured against the faster single-run "
+            "configuration, the batch itself is below the 2× target."
+            if same < 2 or same_cpu < 2
+            else f"Against the batch's own solver run alone it is {same:.2f}× ({same_cpu:.2f}×)."
+        )
+    if cpu >= 2:
+        return (
+            f"**The target is met in CPU time ({cpu:.2f}×) but not in wall time ({wall:.2f}×)**: "
+            "the batch's wall time is its CPU time stretched by the other users' jobs on this "
+            "machine, more than the single runs' was in the same run; both ratios must reach 2 "
+            "for the target to be claimed."
         )
     if wall >= 2:
         return (
