@@ -20,7 +20,11 @@ derivative is NaN/inf).
 Results go to `results/robustness/<family>.json` (one record per case, written atomically as
 they finish); `python experiments/robustness.py docs` writes `docs/robustness.md` from them.
 
-Usage: `python experiments/robustness.py impact|deploy|long|docs|all`.
+Impact cases that miss the tighter-tolerance check are then diagnosed (`diagnose_impact`:
+rtol ladder at two largest steps, and a 1e-9 change of v0), into `diagnosis.json`.
+
+Usage: `python experiments/robustness.py impact|diagnosis|deploy|diagnosis-deploy|long|docs|all`
+(`all` runs every family and both diagnoses).
 """
 
 from __future__ import annotations
@@ -99,6 +103,12 @@ def impact_outputs(traj):
     return jnp.stack([traj.q[-1, 0], traj.v[-1, 0]])
 
 
+def impact_scales(traj):
+    """The scale of each output: the largest |x| and |v_x| over the run. (A journal captured
+    by a soft, damped contact ends nearly at rest: its final speed is no scale for an error.)"""
+    return jnp.stack([jnp.max(jnp.abs(traj.q[:, 0])), jnp.max(jnp.abs(traj.v[:, 0]))])
+
+
 # --- deploy_array family -----------------------------------------------------------------------
 
 DEPLOY_CASES = [
@@ -112,7 +122,7 @@ DEPLOY_CASES = [
     ("c_e = 1", {"restitution": 1.0}),
     ("μ = 0", {"friction_coefficient": 0.0}),
     ("μ = 0.8", {"friction_coefficient": 0.8}),
-    ("spring preload ×10", {"spring_stiffness": None}),  # filled below: 10 × default
+    ("spring preload ×10", {"spring_stiffness": None}),  # filled below: k × 10 (τ = k(α0 − α))
 ]
 DEPLOY_T_END = 0.7
 LONG_T_END = 20.0
@@ -136,6 +146,23 @@ def deploy_params(case):
 def deploy_outputs(traj):
     """Deployment angle at the saved times (panel 1 is the first body)."""
     return 0.5 * jnp.pi - traj.q[:, 2]
+
+
+def deploy_scales(traj):
+    """The scale of the deployment angle: its largest magnitude over the run."""
+    return jnp.max(jnp.abs(deploy_outputs(traj)))
+
+
+SCALES = {impact_outputs: impact_scales, deploy_outputs: deploy_scales}
+
+
+def relative_difference(outputs, traj, reference):
+    """max |outputs(traj) − outputs(reference)| / scale, each output scaled by its largest
+    magnitude over the reference run."""
+    a, b = np.asarray(outputs(traj)), np.asarray(outputs(reference))
+    scale = np.maximum(np.asarray(SCALES[outputs](reference)), 1e-300)
+    scale = scale.reshape(scale.shape + (1,) * (b.ndim - scale.ndim))
+    return float(np.max(np.abs(a - b) / scale))
 
 
 # --- one case ----------------------------------------------------------------------------------
@@ -180,16 +207,17 @@ def run_case(scene, params, t_end, control, outputs, n_save, gradient=True, diff
     record["ref_status"] = ref.status()
     if finite and np.all(np.isfinite(np.asarray(ref.q))):
         # Dissipated energy: a sturdy "same answer" even where the path is chaotic (rattling).
-        ref_d = float(energy_balance(ref_mech, ref.q, ref.v, ref.memory)["dissipated"][-1])
+        ref_balance = energy_balance(ref_mech, ref.q, ref.v, ref.memory)
+        ref_d = float(ref_balance["dissipated"][-1])
         record["ref_dissipated_difference_rel"] = abs(record["dissipated_J"] - ref_d) / moved
-    a = np.asarray(outputs(traj))
-    b = np.asarray(outputs(ref))
-    scale = max(float(np.max(np.abs(b))), 1e-300)
-    record["ref_difference_rel"] = float(np.max(np.abs(a - b)) / scale)
+        # Does the energy residual fall with the tolerance (integration error)?
+        record["ref_energy_residual_rel"] = (
+            float(np.max(np.abs(np.asarray(ref_balance["residual"])))) / moved
+        )
+    record["ref_difference_rel"] = relative_difference(outputs, traj, ref)
     window = min(t_end, diffrax_t_end)
     if window < t_end:  # the diffrax path is compared over the first `window` seconds only
         short = simulate(mech, init, window, n_save=n_save, **control)
-        b_short = np.asarray(outputs(short))
         moved_short = None
         if short.ok and np.all(np.isfinite(np.asarray(short.q))):
             bal = energy_balance(mech, short.q, short.v, short.memory)
@@ -199,9 +227,9 @@ def run_case(scene, params, t_end, control, outputs, n_save, gradient=True, diff
             )
             d_short = float(bal["dissipated"][-1])
     else:
-        b_short, moved_short = a, record.get("energy_moved_J")
+        short, moved_short = traj, record.get("energy_moved_J")
         d_short = record.get("dissipated_J")
-    record["diffrax"] = diffrax_comparison(scene, params, window, control, outputs, n_save, b_short)
+    record["diffrax"] = diffrax_comparison(scene, params, window, control, outputs, n_save, short)
     record["diffrax"]["t_end"] = window
     if "dissipated_J" in record["diffrax"] and moved_short:
         record["diffrax"]["dissipated_difference_rel"] = (
@@ -214,7 +242,8 @@ def run_case(scene, params, t_end, control, outputs, n_save, gradient=True, diff
 
 def diffrax_comparison(scene, params, t_end, control, outputs, n_save, reference):
     """The same run with the diffrax path (`solver="kvaerno5"`, index-1 ODE with projection):
-    the outputs' difference to `reference` and the energy dissipated."""
+    the outputs' difference to the generalized-α trajectory `reference` over the same window,
+    and the energy dissipated."""
     mech = metered(scene.build(params))
     start = time.perf_counter()
     traj = simulate(
@@ -227,11 +256,9 @@ def diffrax_comparison(scene, params, t_end, control, outputs, n_save, reference
     )
     traj.q.block_until_ready()
     wall = time.perf_counter() - start
-    out = np.asarray(outputs(traj))
-    scale = max(float(np.max(np.abs(reference))), 1e-300)
     record = {
         "status": traj.status(),
-        "difference_rel": float(np.max(np.abs(out - reference)) / scale),
+        "difference_rel": relative_difference(outputs, traj, reference),
         "steps": int(traj.stats["num_accepted_steps"]),
         "wall_s": wall,
     }
@@ -271,6 +298,168 @@ def directional_derivative(scene, params, t_end, control, outputs, n_save):
     }
 
 
+# --- why an impact case misses the tighter-tolerance check ------------------------------------
+
+DIAGNOSIS_RTOLS = (1e-8, 1e-9, 1e-10)  # atol = rtol × 1e-5 m, as in IMPACT_CONTROL
+DIAGNOSIS_DT_MAX = (IMPACT_CONTROL["dt_max"], 1e-6)  # the matrix's largest step; Impact's own
+PERTURBATION = 1e-9  # relative change of v0 in the sensitivity run
+
+
+def missed_tighter_check(records):
+    """Impact cases whose outputs or dissipated energy differ from the tighter run by more
+    than AGREE_TOL."""
+    return [
+        name
+        for name, r in records.items()
+        if not name.startswith("_")
+        and max(r.get("ref_difference_rel", 0.0), r.get("ref_dissipated_difference_rel", 0.0))
+        > AGREE_TOL
+    ]
+
+
+def diagnose_impact(case):
+    """The same impact at rtol 1e-8, 1e-9, 1e-10 with the matrix's largest step (1e-5 s) and
+    with 1e-6 s (the Impact scene's default), and the tightest, smallest-step run again with
+    v0 × (1 + 1e-9). Each is compared with that tightest, smallest-step run ("best"): outputs
+    as in the matrix, dissipated energy relative to the energy moved.
+
+    Reading: an error that shrinks with the largest step but not with rtol is the contact
+    memory's (the approach speed v⁻ of the damping law is located on each accepted step and
+    its error is not seen by the step-size controller); a v0 change of 1e-9 that moves the
+    outputs as much as the tolerance does means the path itself is that sensitive (chaotic
+    rattling), so no tolerance pins the final state down."""
+
+    def run(params, rtol, dt_max):
+        mech = metered(scene.build(params))
+        init = scene.initial_state(params, mech)
+        mech, init = add_clock(mech, init)
+        control = dict(rtol=rtol, atol=rtol * 1e-5, dt_max=dt_max)
+        traj = simulate(mech, init, IMPACT_T_END, n_save=201, **control)
+        dissipated = float(energy_balance(mech, traj.q, traj.v, traj.memory)["dissipated"][-1])
+        joint = traj.memory[0]["inner"]  # the metered clearance joint's memory
+        contact = (
+            np.asarray(joint["in_contact"]).reshape(-1) > 0.5,
+            np.asarray(joint["impact_velocity"]).reshape(-1),
+        )
+        return traj, dissipated, contact
+
+    def v_minus_difference(contact, best_contact):
+        """Largest |v⁻ − v⁻_best| / v0 over saved times where both runs are in contact."""
+        both = contact[0] & best_contact[0]
+        if not np.any(both):
+            return 0.0
+        return float(np.max(np.abs(contact[1] - best_contact[1])[both])) / speed
+
+    scene, params = impact_params(case)
+    speed = float(params["impact_speed"])
+    moved = 0.5 * float(params["mass"]) * speed**2
+    best, best_d, best_contact = run(params, DIAGNOSIS_RTOLS[-1], DIAGNOSIS_DT_MAX[-1])
+    rows = []
+    for dt_max in DIAGNOSIS_DT_MAX:
+        for rtol in DIAGNOSIS_RTOLS:
+            traj, d, contact = run(params, rtol, dt_max)
+            rows.append(
+                dict(
+                    rtol=rtol,
+                    dt_max=dt_max,
+                    status=traj.status(),
+                    steps=int(traj.stats["num_accepted_steps"]),
+                    difference_rel=relative_difference(impact_outputs, traj, best),
+                    dissipated_difference_rel=abs(d - best_d) / moved,
+                    v_minus_difference_rel=v_minus_difference(contact, best_contact),
+                )
+            )
+    bumped = dict(params, impact_speed=float(params["impact_speed"]) * (1 + PERTURBATION))
+    traj, d, contact = run(bumped, DIAGNOSIS_RTOLS[-1], DIAGNOSIS_DT_MAX[-1])
+    perturbed = dict(
+        status=traj.status(),
+        difference_rel=relative_difference(impact_outputs, traj, best),
+        dissipated_difference_rel=abs(d - best_d) / moved,
+        v_minus_difference_rel=v_minus_difference(contact, best_contact),
+    )
+    return {"rows": rows, "perturbed": perturbed}
+
+
+DEPLOY_DIAGNOSIS_RTOLS = (1e-6, 1e-7, 1e-8)  # atol = rtol × 1e-3, as in the default control
+
+
+def missed_energy_check(records):
+    """Cases whose energy residual is above ENERGY_TOL."""
+    return [
+        name
+        for name, r in records.items()
+        if not name.startswith("_") and r.get("energy_residual_rel", 0.0) > ENERGY_TOL
+    ]
+
+
+def diagnose_deploy_energy(case):
+    """The energy residual of a deploy_array case at rtol 1e-6 (the default), 1e-7 and 1e-8
+    (same clocked, metered program), and at the default without the clock body (the
+    instrument adds three zero-error coordinates to the RMS error norm, so it changes the step
+    sequence slightly). Whether the residual falls with the tolerance says whether it is
+    integration error; the clock run shows how much it depends on where the steps fall."""
+    scene, params = deploy_params(case)
+    base = metered(scene.build(params))
+    plain_init = scene.initial_state(params, base)
+    clocked, init = add_clock(base, plain_init)
+    rows = []
+    for rtol in DEPLOY_DIAGNOSIS_RTOLS + (None,):
+        control = dict(DeployArray.default_control)
+        if rtol is not None:
+            control.update(rtol=rtol, atol=rtol * 1e-3)
+        mech, state = (base, plain_init) if rtol is None else (clocked, init)
+        start = time.perf_counter()
+        traj = simulate(mech, state, DEPLOY_T_END, n_save=201, **control)
+        traj.q.block_until_ready()
+        row = dict(
+            rtol=control["rtol"],
+            clock=rtol is not None,
+            status=traj.status(),
+            steps=int(traj.stats["num_accepted_steps"]),
+            rejected=int(traj.stats["num_rejected_steps"]),
+            wall_s=time.perf_counter() - start,
+        )
+        if traj.ok:
+            balance = energy_balance(mech, traj.q, traj.v, traj.memory)
+            moved = float(
+                np.max(np.asarray(balance["kinetic"]) + np.asarray(balance["dissipated"]))
+                + np.max(np.abs(np.asarray(balance["injected"])))
+            )
+            row["energy_residual_rel"] = (
+                float(np.max(np.abs(np.asarray(balance["residual"])))) / moved
+            )
+            row["dissipated_J"] = float(balance["dissipated"][-1])
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    return {"rows": rows}
+
+
+def run_diagnosis(families=("impact", "deploy")):
+    """Diagnose the impact cases that miss the tighter-tolerance check and the deploy cases
+    that miss the energy check (each written to `diagnosis.json` as it finishes)."""
+    records = _load("diagnosis")
+    records.setdefault("_meta", {"versions": run_metadata(), "machine": platform.machine()})
+    todo = []
+    if "impact" in families:
+        todo += [
+            (f"impact: {name}", diagnose_impact, dict(IMPACT_CASES)[name])
+            for name in missed_tighter_check(_load("impact"))
+        ]
+    if "deploy" in families:
+        todo += [
+            (f"deploy: {name}", diagnose_deploy_energy, dict(DEPLOY_CASES)[name])
+            for name in missed_energy_check(_load("deploy"))
+        ]
+    for key, diagnose, case in todo:
+        if key in records:
+            continue
+        print(f"[diagnosis] {key} ...", flush=True)
+        records[key] = diagnose(case)
+        _save("diagnosis", records)
+        print(json.dumps(records[key], default=str)[:400], flush=True)
+    return records
+
+
 # --- driver ------------------------------------------------------------------------------------
 
 
@@ -296,6 +485,11 @@ def run_family(family):
         control = dict(DeployArray.default_control)
         cases = [(n, c, deploy_params, DEPLOY_T_END, control, deploy_outputs, 201)
                  for n, c in DEPLOY_CASES]  # fmt: skip
+        # Cheapest first, so that a run stopped for time has done the most cases: those that
+        # compile a new structure (σ = 0, μ = 0) and c = 1 µm (Kvaerno5 takes ~4× the steps)
+        # last.
+        last = ("σ = 0 (Hertz)", "μ = 0", "c = 1 µm")
+        cases.sort(key=lambda case: last.index(case[0]) + 1 if case[0] in last else 0)
     else:
         control = dict(DeployArray.default_control)
         cases = [("base, 20 s", {}, deploy_params, LONG_T_END, control, deploy_outputs, 2001)]
@@ -331,6 +525,8 @@ def _fmt(x, spec=".2e"):
 def _table(records, names=()):
     pending = [n for n in names if n not in records]
     records = {**records, **{n: {"status": "not run yet (rerun the script)"} for n in pending}}
+    # Rows in the matrix's order (cases may have been run in another).
+    records = {n: records[n] for n in [*names, *[k for k in records if k not in names]]}
     head = (
         "| case | status | finite | steps (rejected) | min / max step [s] | energy residual "
         "/ moved | Δ outputs vs tighter tol | Δ dissipated vs tighter tol | d/ds finite | "
@@ -364,7 +560,9 @@ def _table(records, names=()):
             f"| {name} | {r.get('status')} | {_fmt(r.get('finite'))} | "
             f"{_fmt(r.get('steps'), '.0f')} ({_fmt(r.get('rejected'), '.0f')}) | "
             f"{_fmt(r.get('min_step'), '.1e')} / {_fmt(r.get('max_step'), '.1e')} | "
-            f"{_fmt(r.get('energy_residual_rel'), '.1e')} | "
+            f"{_fmt(r.get('energy_residual_rel'), '.1e')}"
+            + (f" ({r['ref_energy_residual_rel']:.1e})" if "ref_energy_residual_rel" in r else "")
+            + " | "
             f"{_fmt(r.get('ref_difference_rel'), '.1e')} | "
             f"{_fmt(r.get('ref_dissipated_difference_rel'), '.1e')} | "
             f"{_fmt(r.get('gradient_finite'))} | "
@@ -395,6 +593,9 @@ def _verdict_lines(cases):
     bad_status = [k for k, r in cases.items() if r.get("status") != "ok"]
     bad_energy = [k for k, r in cases.items() if r.get("energy_residual_rel", 1.0) > ENERGY_TOL]
     bad_ref = [k for k, r in cases.items() if r.get("ref_difference_rel", 0.0) > AGREE_TOL]
+    bad_ref_d = [
+        k for k, r in cases.items() if r.get("ref_dissipated_difference_rel", 0.0) > AGREE_TOL
+    ]
     bad_grad = [k for k, r in cases.items() if r.get("gradient_finite") is False]
     bad_solvers = [k for k, r in cases.items() if not _solvers_agree(r.get("diffrax", {}))]
     worst = max((r.get("energy_residual_rel", 0.0) for r in cases.values()), default=0.0)
@@ -410,6 +611,12 @@ def _verdict_lines(cases):
             if bad_ref
             else f"all within {AGREE_TOL:g}"
         ),  # fmt: skip
+        "* dissipated energy vs that run: "
+        + (
+            f"differs by more than {AGREE_TOL:g} of the energy moved in {'; '.join(bad_ref_d)}"
+            if bad_ref_d
+            else f"all within {AGREE_TOL:g} of the energy moved"
+        ),
         "* generalized-α vs the diffrax path (Kvaerno5): "
         + (
             f"outputs and dissipated energy both differ by more than {SOLVERS_TOL:g} in "
@@ -458,7 +665,7 @@ def _diffrax_cost(deploy):
     return (
         f"in the base case Kvaerno5 took {d['steps']} accepted steps and {d['wall_s']:.0f} s "
         f"(compilation included) for {1e3 * d['t_end']:g} ms, generalized-α "
-        f"{base.get('steps', '?')} steps and {base.get('wall_s', float('nan')):.0f} s "
+        f"{base.get('steps', float('nan')):.0f} steps and {base.get('wall_s', float('nan')):.0f} s "
         f"(compilation included) for all {base.get('t_end', DEPLOY_T_END):g} s."
     )
 
@@ -466,8 +673,9 @@ def _diffrax_cost(deploy):
 def _deploy_cost(deploy):
     base = deploy.get(DEPLOY_CASES[0][0])
     if base is None or "wall_s" not in base:
-        return "Not measured yet."
+        return "* **Where the deploy family's time goes.** Not measured yet."
     text = (
+        "* **Where the deploy family's time goes.** "
         f"Base case, seconds (compilation included where the program is new): run "
         f"{base['wall_s']:.0f}, run at rtol ÷ 10 {base.get('ref_wall_s', float('nan')):.0f}, "
         f"Kvaerno5 over {1e3 * base['diffrax'].get('t_end', np.nan):g} ms "
@@ -478,16 +686,180 @@ def _deploy_cost(deploy):
         "per case (a rough scaling, compilation included) — that, not the derivative, was why "
         "the base case did not finish in 60 min."
     )
+    parts = [
+        r.get("wall_s", 0.0)
+        + r.get("ref_wall_s", 0.0)
+        + r.get("diffrax", {}).get("wall_s", 0.0)
+        + r.get("gradient_wall_s", 0.0)
+        for k, r in deploy.items()
+        if not k.startswith("_")
+    ]
+    text += (
+        f" The {len(parts)} deploy cases run took {sum(parts) / 60:.0f} min in all (run, tighter "
+        "run, Kvaerno5 window and derivative; the 50 ms generalized-α window not counted)."
+    )
     missing = [n for n, _ in DEPLOY_CASES if n not in deploy]
     if missing:
         text += f" Not run in the time available: {'; '.join(missing)}."
     return text
 
 
+def _impact_diagnosis_table(diag):
+    keys = [k for k in diag if k.startswith("impact: ")]
+    if not keys:
+        return "No impact case missed the tighter-tolerance check.\n"
+    head = (
+        "| case | largest step [s] | rtol | steps | Δ outputs vs best | ΔD vs best "
+        "| Δv⁻ / v0 vs best |\n|---|---|---|---|---|---|---|\n"
+    )
+    rows = []
+    for key in keys:
+        d = diag[key]
+        for r in d["rows"]:
+            rows.append(
+                f"| {key[8:]} | {r['dt_max']:.0e} | {r['rtol']:.0e} | {r['steps']} | "
+                f"{r['difference_rel']:.1e} | {r['dissipated_difference_rel']:.1e} | "
+                f"{r['v_minus_difference_rel']:.1e} |"
+            )
+        p = d["perturbed"]
+        rows.append(
+            f"| {key[8:]}: v0 × (1 + {PERTURBATION:g}) | {DIAGNOSIS_DT_MAX[-1]:.0e} | "
+            f"{DIAGNOSIS_RTOLS[-1]:.0e} | — | {p['difference_rel']:.1e} | "
+            f"{p['dissipated_difference_rel']:.1e} | {p['v_minus_difference_rel']:.1e} |"
+        )
+    return head + "\n".join(rows) + "\n"
+
+
+def _deploy_diagnosis_table(diag, deploy):
+    keys = [k for k in diag if k.startswith("deploy: ")]
+    missed = missed_energy_check(deploy)
+    pending = [n for n in missed if f"deploy: {n}" not in diag]
+    if not missed:
+        return "No deploy_array row run missed the energy check.\n"
+    if not keys:
+        return f"Not run yet for: {'; '.join(pending)}.\n"
+    head = (
+        "| case | rtol | clock body | steps (rejected) | energy residual / moved | D [J] "
+        "| wall [s] |\n|---|---|---|---|---|---|---|\n"
+    )
+    rows = []
+    for key in keys:
+        for r in diag[key]["rows"]:
+            rows.append(
+                f"| {key[8:]} | {r['rtol']:.0e} | {'yes' if r['clock'] else 'no'} | "
+                f"{r['steps']} ({r['rejected']}) | {_fmt(r.get('energy_residual_rel'), '.1e')} | "
+                f"{_fmt(r.get('dissipated_J'), '.4f')} | {r['wall_s']:.0f} |"
+            )
+    return head + "\n".join(rows) + "\n"
+
+
+def _small_clearance_finding(impact):
+    rows = {
+        k: r
+        for k, r in impact.items()
+        if not k.startswith("_") and r.get("params", {}).get("clearance", 1.0) <= 1e-6
+    }
+    if not rows:
+        return "not run yet."
+    worst_ref = max(r.get("ref_difference_rel", np.inf) for r in rows.values())
+    worst_energy = max(r.get("energy_residual_rel", np.inf) for r in rows.values())
+    steps = [r["steps"] for r in rows.values() if "steps" in r]
+    smallest = min(r.get("min_step", np.inf) for r in rows.values())
+    return (
+        f"(c ≤ 1 µm, {len(rows)} rows) run, stay finite and balance energy (residual ≤ "
+        f"{worst_energy:.1e}); the journal rattles, so they take {min(steps):.0f}–"
+        f"{max(steps):.0f} steps (smallest {smallest:.1e} s), but with steps ended on each "
+        f"contact onset (`simulate(..., locate_events=True)`, the default) their outputs agree "
+        f"with the 10× tighter run to {worst_ref:.1e}: the path is not chaotic at these "
+        "tolerances. (Session 3, before event location, found final states that depended on "
+        "the tolerance here.)"
+    )
+
+
+def _centre_finding(diag):
+    d = diag.get("impact: E = 1 GPa")
+    if d is None:
+        return ""
+    loose, tight = d["rows"][0], d["rows"][1]
+    d_loose, v_loose = loose["dissipated_difference_rel"], loose["v_minus_difference_rel"]
+    tight_worst = max(tight["dissipated_difference_rel"], tight["v_minus_difference_rel"])
+    bumped = d["perturbed"]["dissipated_difference_rel"]
+    return f"""* **Open bug: v⁻ through the bearing's centre** (E = 1 GPa row; diagnosis above; a
+  strict xfail in `tests/test_robustness.py` reproduces it deterministically). At rtol
+  {loose["rtol"]:g} with steps ≤ {loose["dt_max"]:g} s the run's dissipated energy differs
+  from the converged run's by {d_loose:.1e} of the energy moved, and its v⁻ by up to
+  {v_loose:.1e} v0; at rtol {tight["rtol"]:g} both are within {tight_worst:.0e}, and a
+  {PERTURBATION:g} change of v0 moves them by {bumped:.0e}: not chaos, one wrong v⁻. The soft
+  contact (penetrating many clearances deep) throws the journal back across the gap, and one
+  step holds both the passage through the centre and the far side's onset. δ = |e| − c has a
+  kink at the centre (δ̇ jumps from −|ė| to +|ė|); the step's cubic Hermite of δ cannot
+  follow it, and v⁻ read off it at the onset is too large, so the second contact is
+  over-damped. Event location re-ends the step at the onset, but the retried step still
+  starts before the centre. Not fixed here: candidates are to end a step at the closest
+  approach to the centre when it also holds an onset (one more event), or to interpolate the
+  eccentricity vector (smooth through the centre) instead of δ."""
+
+
+def _deploy_dissipation_finding(deploy):
+    rows = {
+        k: r
+        for k, r in deploy.items()
+        if not k.startswith("_") and r.get("ref_dissipated_difference_rel", 0.0) > AGREE_TOL
+    }
+    if not rows:
+        return ""
+    worst_d = max(r["ref_dissipated_difference_rel"] for r in rows.values())
+    worst_out = max(r.get("ref_difference_rel", np.inf) for r in rows.values())
+    return (
+        f"* **deploy_array dissipated energy vs the tighter run.** In {'; '.join(rows)} the "
+        f"energy dissipated by {DEPLOY_T_END:g} s differs from the 10× tighter run's by up to "
+        f"{worst_d:.1e} of the energy moved, while the deployment angle agrees to "
+        f"{worst_out:.1e}. Where both runs balance their energy (all but the rows of the "
+        "item above), the difference is matched by the energy still stored or moving at "
+        "the end, or by the energy J the latch took at engagement (set by the step that "
+        "crosses α_L). Not diagnosed further here.\n"
+    )
+
+
+def _deploy_energy_finding(deploy, diag):
+    missed = missed_energy_check(deploy)
+    if not missed:
+        return ""
+    rows = [deploy[n] for n in missed]
+    worst = max(r["energy_residual_rel"] for r in rows)
+    tight = [r.get("ref_energy_residual_rel") for r in rows]
+    text = (
+        f"* **deploy_array energy residual at the default tolerance.** {'; '.join(missed)}: "
+        f"residual up to {worst:.1e} of the energy moved at rtol "
+        f"{DeployArray.default_control['rtol']:g} (tolerance {ENERGY_TOL:g}), "
+    )
+    if all(t is not None for t in tight):
+        fall = min(r["energy_residual_rel"] / t for r, t in zip(rows, tight, strict=True))
+        text += (
+            f"but {max(tight):.1e} at most in the same runs at a 10× tighter tolerance (at "
+            f"least {fall:.0f}× smaller): integration error that falls much faster than the "
+            "tolerance. "
+        )
+    done = [diag[f"deploy: {n}"] for n in missed if f"deploy: {n}" in diag]
+    if done:
+        plain = [r for d in done for r in d["rows"] if not r["clock"]]
+        clocked = [r for d in done for r in d["rows"] if r["clock"] and r["rtol"] == 1e-6]
+        text += (
+            "Without the clock body (same tolerance, slightly different steps) it is "
+            + ", ".join(f"{r.get('energy_residual_rel', float('nan')):.1e}" for r in plain)
+            + " against "
+            + ", ".join(f"{r.get('energy_residual_rel', float('nan')):.1e}" for r in clocked)
+            + " with it, so the failure is not the instrument's; at rtol 1e-8 the residual "
+            "falls further (diagnosis table above). "
+        )
+    return text + "Use rtol ≤ 1e-7 where the energy balance matters to better than 1 %.\n"
+
+
 def write_docs():
     impact = _load("impact")
     deploy = _load("deploy")
     long = _load("long")
+    diag = _load("diagnosis")
     meta = (impact or deploy or long).get("_meta", {})
     versions = meta.get("versions", {})
     text = f"""# Robustness: extreme cases, bad input, nothing lost
@@ -508,12 +880,17 @@ diffrax {versions.get("diffrax", "?")}, float64. Solver: generalized-α (ρ∞ =
   accepted step), J the energy put in by memory updates (the latch engaging at an overshoot).
   The residual is the integrator's energy error plus its numerical dissipation (ρ∞ = 0.8),
   scaled by the energy that moved (max of T + D, plus |J|). Stated tolerance: {ENERGY_TOL:g}.
+  In brackets: the same residual of the run at the 10× tighter tolerance below.
 * **Δ vs tighter tol**: max difference of the outputs (impact: final x and v_x of the journal;
   deploy: the deployment angle at 201 saved times) to the same run (same compiled program)
-  with rtol and atol ÷ 10, relative to the output's largest magnitude. Stated tolerance:
-  {AGREE_TOL:g}. For a journal rattling in a sub-micrometre gap the path is chaotic (hundreds
-  of impacts in 2 ms), so the final state is not a fair "same answer"; the energy dissipated
-  by the end (relative to the energy moved) is, and is shown beside it.
+  with rtol and atol ÷ 10, each output relative to its largest magnitude over the run
+  (impact: max |x(t)| and max |v_x(t)|; a journal captured by a soft damped contact ends
+  nearly at rest, so its final speed is no scale). Stated tolerance:
+  {AGREE_TOL:g}. Beside it, the energy dissipated by the end (relative to the energy moved):
+  a sturdier "same answer" where a path is sensitive (a journal rattling in a tiny gap).
+* **steps end on contact events**: adaptive runs redo a step inside which a clearance
+  contact begins (or its approach speed v⁻ peaks) so that it ends just past the event
+  (`simulate(..., locate_events=True)`, the default): v⁻ is then as accurate as the state.
 * **steps**: accepted (rejected) steps, and the smallest/largest accepted step from a clock
   body (`add_clock`; it adds 3 coordinates with zero error to the RMS norm, ≈ sqrt(n/(n+3))).
   The first step is the initial guess 1e-6 s, so a minimum of 1e-6 means "never below it".
@@ -541,7 +918,8 @@ the centred journal is in (light) contact from t = 0.
 {_table(impact, [n for n, _ in IMPACT_CASES])}{_single_point_note(impact)}
 ## deploy_array, 0.7 s (latch at ≈ 0.54 s), and 20 s
 
-Both clearance joints changed together; step control {dict(DeployArray.default_control)}.
+Both clearance joints changed together; the spring preload is k α0, so ×10 is k ×10; step
+control {dict(DeployArray.default_control)}.
 
 **0.7 s runs:**
 
@@ -552,6 +930,26 @@ Both clearance joints changed together; step control {dict(DeployArray.default_c
 {_verdict(long, ["base, 20 s"])}
 {_table(long, ["base, 20 s"])}
 
+## Rows beyond a tolerance: diagnosis
+
+`python experiments/robustness.py diagnosis` reruns, in more detail, the impact rows whose
+outputs or dissipated energy differ from the tighter run by more than {AGREE_TOL:g};
+`diagnosis-deploy` the deploy_array rows whose energy residual is above {ENERGY_TOL:g}.
+
+**Impact**: each row against the same case at rtol {DIAGNOSIS_RTOLS[-1]:g} with steps
+≤ {DIAGNOSIS_DT_MAX[-1]:g} s ("best"); outputs and ΔD as in the matrix. The last row of each
+case is "best" again with v0 changed by {PERTURBATION:g} (relative): if that moves the outputs
+as much as the tolerance does, the path itself is that sensitive (chaotic rattling) and no
+tolerance pins the final state down. An error that shrinks with the largest step but not
+with rtol is an error the step-size controller does not see.
+
+{_impact_diagnosis_table(diag)}
+**deploy_array**: the energy residual of the failing rows at rtol 1e-6 (the default),
+1e-7 and 1e-8 (atol = rtol × 1e-3), same clocked program, and at the default without the
+clock body (which only adds three zero-error coordinates to the RMS error norm, so it moves
+where the steps fall).
+
+{_deploy_diagnosis_table(diag, deploy)}
 ## Findings and fixes
 
 * **Impact speed memory at a centred start.** A journal whose rough law is already past its
@@ -566,10 +964,8 @@ Both clearance joints changed together; step control {dict(DeployArray.default_c
   damping laws at v⁻ = 0 all have finite derivatives (`tests/test_contact_properties.py`,
   hypothesis over the whole valid domain, and `tests/test_robustness.py` through a simulated
   impact from e = 0 and across a latch engagement).
-* **Sub-micrometre clearances** run and stay finite, but the journal rattles: the number of
-  impacts, the smallest steps and the energy residual grow as c shrinks, and the final state
-  depends on the tolerance (chaotic), while the dissipated energy does not much. Rows above
-  the stated tolerances are listed in the verdicts, not hidden.
+* **Sub-micrometre clearances** {_small_clearance_finding(impact)}
+{_centre_finding(diag)}
 * **Clearances below ~3σ: both sides of the bore.** With c ≲ 3σ the rough law acts on a
   centred journal from t = 0. The joint used to apply it at one contact point along
   n = e/|e|, which pushed the centred journal with F_e(−c) in a direction that flips within
@@ -578,8 +974,8 @@ Both clearance joints changed together; step control {dict(DeployArray.default_c
   both sides of the bore along the line of centres (docs/contact.md, "Both sides of the
   bearing": net elastic force smooth and zero at e = 0, stiffness 2 F_e'(−c); identical to the
   single-point joint wherever the far side is inactive, so the Hertz and c ≫ σ rows are
-  unchanged). Every row above was run with it, except those marked † in the impact table.
-* **Where the deploy family's time goes.** {_deploy_cost(deploy)}
+  unchanged). Every row above was run with it.
+{_deploy_energy_finding(deploy, diag)}{_deploy_dissipation_finding(deploy)}{_deploy_cost(deploy)}
 * **Latch engagement** adds energy J = ½ k_L (α − α_L)² at the step after α crosses α_L (the
   overshoot is bounded by one step); it is booked as energy put in, not as an error.
 
@@ -590,14 +986,24 @@ parameter, its value and the valid range (`tests/test_bad_input.py`): zero or ne
 clearance, negative Ra or σ, ν outside (−1, 0.5), c_e outside (0, 1], NaN or inf values, a
 journal larger than its bearing (`contact.radial_clearance`), a crank as long as its rod, an
 unassemblable pose (`AssemblyError` names the residual and the worst joint), unknown scene or
-parameter names, bad `--t-end`/`--n-save`, an output folder that already holds results.
+parameter names (in `simulate`, `sweep` — grid names and values too —, `optimize` and `fit`),
+bad `--t-end`/`--n-save`, an output folder that already holds results; malformed measurement
+files for `fit` (`tests/test_fit.py`: missing time column, unsorted times, NaN, ragged rows,
+non-numbers, bad noise levels, duplicate columns, unreadable npz). The contact laws are
+property-tested with hypothesis over the scenes' whole parameter range and beyond
+(`tests/test_contact_properties.py`).
 
 Every result file is written through `jaxdeploy.io` (temporary file in the same folder,
-fsync, atomic rename, folder fsync). `summary.json` is written last and marks a complete
+fsync, atomic rename, folder fsync; the result gets the permissions a plain write would give),
+beside the parameters, versions and seed (`null` where nothing random is drawn) of the run:
+`simulate` (summary.json), `sweep` (manifest.json), `optimize` (result.json), `fit`
+(fit.json), `bench` (work_precision.json). `summary.json` is written last and marks a complete
 result; with `--overwrite` the old one is deleted before anything new is written, so a rerun
 that dies half-way cannot pass for a complete one. `tests/test_robustness.py` kills a writer
 with SIGKILL after half of its bytes: the previous file survives intact, only a hidden
-`.tmp-*` file remains.
+`.tmp-*` file remains. A previous result folder is refused unless `--overwrite` is given
+(`sweep` refuses a non-empty folder and continues its own only with `--resume`; `bench` has
+both).
 """
     atomic_write_bytes(DOC, text.encode())
     print(f"wrote {DOC}")
@@ -608,6 +1014,10 @@ def main(argv):
     for family in ("impact", "deploy", "long"):
         if what in (family, "all"):
             run_family(family)
+    if what in ("diagnosis", "all"):
+        run_diagnosis(("impact", "deploy") if what == "all" else ("impact",))
+    if what == "diagnosis-deploy":
+        run_diagnosis(("deploy",))
     write_docs()
 
 
