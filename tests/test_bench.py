@@ -45,25 +45,11 @@ def test_interrupted_run_resumes_without_repeating_finished_configurations(tmp_p
     """Rows are written after every configuration; `--resume` keeps the saved reference and
     the finished rows and runs only the rest. Two cheap scipy configurations against a
     reference from the event-based numpy model stand in for the full list."""
-    import numpy as np
-
     from jaxdeploy.benchmarks import work_precision as wp
-    from jaxdeploy.benchmarks.peers import SliderCrankNumpy
-    from jaxdeploy.benchmarks.reference import Reference
-    from jaxdeploy.scenes import SliderCrank
 
-    scene = SliderCrank()
-    p = scene.resolve_params(None)
-    s0 = scene.initial_state(p, scene.build(p))
-    ts = np.linspace(0.0, 0.3e-3, 31)
-    peer = SliderCrankNumpy(p).solve(s0, ts[-1], ts, "DOP853", 1e-10, 1e-12)
-    evidence = [dict(solver="numpy DOP853", rtol=1e-10, window=0.0, full=0.0, steps=0)]
-    reference = Reference(
-        "slider_crank", p, ts, peer.ys[:, :9], peer.ys[:, 9:], ts[-1], 1e-10, evidence
-    )
     out = tmp_path / "bench"
     out.mkdir()
-    reference.save(str(out))
+    _peer_reference().save(str(out))
     configs = [
         wp.Config(f"scipy {m} (numpy)", "rtol=1e-06", "scipy-numpy", m, 1e-6, 1e-9)
         for m in ("DOP853", "LSODA")
@@ -124,19 +110,8 @@ def test_budgeted_configurations_run_in_workers_and_one_over_budget_is_reported(
     import numpy as np
 
     from jaxdeploy.benchmarks import work_precision as wp
-    from jaxdeploy.benchmarks.peers import SliderCrankNumpy
-    from jaxdeploy.benchmarks.reference import Reference
-    from jaxdeploy.scenes import SliderCrank
 
-    scene = SliderCrank()
-    p = scene.resolve_params(None)
-    s0 = scene.initial_state(p, scene.build(p))
-    ts = np.linspace(0.0, 0.3e-3, 31)
-    peer = SliderCrankNumpy(p).solve(s0, ts[-1], ts, "DOP853", 1e-10, 1e-12)
-    evidence = [dict(solver="numpy DOP853", rtol=1e-10, window=0.0, full=0.0, steps=0)]
-    reference = Reference(
-        "slider_crank", p, ts, peer.ys[:, :9], peer.ys[:, 9:], ts[-1], 1e-10, evidence
-    )
+    reference = _peer_reference()
     reference.save(str(tmp_path))
     cfg = wp.Config("scipy DOP853 (numpy)", "rtol=1e-06", "scipy-numpy", "DOP853", 1e-6, 1e-9)
     # Starting a worker (imports, building the mechanism) alone takes longer than 0.2 s.
@@ -174,3 +149,21 @@ def test_report_records_options_versions_and_seed_and_writes_atomically(tmp_path
     assert "jax" in meta["versions"] and "diffrax" in meta["versions"]
     assert "seed" in meta and meta["seed"] is None  # no random numbers drawn
     assert not [p for p in os.listdir(tmp_path) if p.startswith(".tmp-")]
+
+
+def _peer_reference():
+    """A cheap benchmark reference for slider_crank's first 0.3 ms: the event-based numpy
+    model under scipy DOP853 at 1e-10 (stands in for the Dopri8 reference in fast tests)."""
+    import numpy as np
+
+    from jaxdeploy.benchmarks.peers import SliderCrankNumpy
+    from jaxdeploy.benchmarks.reference import Reference
+    from jaxdeploy.scenes import SliderCrank
+
+    scene = SliderCrank()
+    p = scene.resolve_params(None)
+    s0 = scene.initial_state(p, scene.build(p))
+    ts = np.linspace(0.0, 0.3e-3, 31)
+    peer = SliderCrankNumpy(p).solve(s0, ts[-1], ts, "DOP853", 1e-10, 1e-12)
+    evidence = [dict(solver="numpy DOP853", rtol=1e-10, window=0.0, full=0.0, steps=0)]
+    return Reference("slider_crank", p, ts, peer.ys[:, :9], peer.ys[:, 9:], ts[-1], 1e-10, evidence)
