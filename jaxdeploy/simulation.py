@@ -304,10 +304,11 @@ def simulate(
       integrates over the same steps, which is what a finite difference of a replayed run
       must do.
 
-    - `locate_events`: with adaptive steps, a step inside which a clearance joint's contact
-      begins is redone to end just past the onset (`jaxdeploy.solvers.LocateEvents`), so the
-      onset speed v⁻ is as accurate as the state; without it v⁻'s error is set by the step
-      length, not by the tolerance. Only mechanisms with such events trace it.
+    - `locate_events`: with adaptive steps, a step inside which a clearance joint's v⁻ is set
+      (its contact begins, or its approach speed peaks above v⁻) is redone to end just past
+      that event (`jaxdeploy.solvers.LocateEvents`), so v⁻ is as accurate as the state;
+      without it v⁻'s error is set by the step length, not by the tolerance. Only mechanisms
+      with such events trace it.
 
     **Returns:** a `Trajectory`; check `.ok` / `.status()`: a failed solve keeps the states it
     finished and says when and why it stopped.

@@ -1,5 +1,6 @@
 """Event location by step relocation: an adaptive step that a memory event (a clearance
-joint's contact onset) falls inside is redone so that it ends just past the event.
+joint's contact onset, or a peak of its approach speed that raises v⁻) falls inside is redone
+so that it ends just past the event.
 
 Why. A clearance joint's damping needs v⁻, the approach speed at contact onset, which is memory
 taken after each accepted step from the step's cubic Hermite interpolant of δ
@@ -15,8 +16,8 @@ discontinuities"; Shampine & Thompson, *Appl. Numer. Math.* 36 (2001) 403, event
 ODE solvers). Unlike a terminal event with a restart, the solver never stops: the step is
 rejected and retried with the length that ends at the located event.
 
-Rule, with s the onset as a fraction of the step (`Mechanism.event_fraction`, located on the
-step's interpolant):
+Rule, with s the event (onset or peak) as a fraction of the step (`Mechanism.event_fraction`,
+located on the step's interpolant):
 
 * `s ≤ lead`: the contact began at the step's start, where the interpolant matches the exact
   δ and δ̇ — keep the step;
