@@ -1,54 +1,156 @@
-"""The clearance joint's v⁻ memory: the step interpolant of δ that locates onsets and peaks
-(step independence through an impact is checked in tests/test_diffrax_path.py)."""
+"""The clearance joint's v⁻ memory: the step interpolant of the eccentricity e that locates
+onsets and peaks of δ = |e| − c (step independence through an impact is checked in
+tests/test_diffrax_path.py, the whole run through the centre in tests/test_robustness.py).
+
+References are independent of the interpolant: exact polynomial paths e(t) (which the cubic
+Hermite of their end values reproduces), evaluated with numpy and solved with scipy's brentq
+or in closed form."""
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
+from scipy.optimize import brentq
 
-from jaxdeploy.mechanism.clearance import _StepPenetration
+from jaxdeploy.mechanism._step_eccentricity import StepEccentricity
+
+CLEARANCE = 1e-5  # m
+LEVEL = -3e-6  # m: a rough law's onset, 7 µm from the centre
+SMOOTHING = 1e-12  # m, RevoluteClearance's default ε
+H = 1e-5  # s
+
+# A journal 0.139 µm beside the centre, flying through it at ~0.9 m/s towards the far side and
+# braking there (x is a cubic in t): the step holds the centre passage, the far-side onset and
+# a peak of δ̇ after the onset (the case a Hermite of δ itself got wrong).
+X = np.array([1e9, -2.7e4, -0.894, 1.39e-7])  # x(t), highest power first
+Y = np.array([0.0, 0.0, 1e-3, 2e-8])
 
 
-def _cubic(t):
-    """A cubic δ(t) (m) with a rate peak inside [0, h]: exactly representable by the Hermite
-    interpolant of its end values."""
-    return -1e-6 + 4.0 * t + 2e6 * t**2 - 1e12 * t**3
+def _path(t0, x=X, y=Y, roundoff=0.0):
+    """StepEccentricity over [t0, t0 + H] of the exact path, from its end values only."""
+
+    def ends(t):
+        e = jnp.array([jnp.polyval(x, t), jnp.polyval(y, t)])
+        rate = jnp.array([jnp.polyval(jnp.polyder(x), t), jnp.polyval(jnp.polyder(y), t)])
+        return e, rate
+
+    return StepEccentricity(*ends(t0), *ends(t0 + H), H, CLEARANCE, SMOOTHING, roundoff)
 
 
-_RATE = jax.grad(_cubic)
+def _exact(x=X, y=Y):
+    """δ(t), δ̇(t), δ̈(t) of the exact path (numpy)."""
+    dx, dy = np.polyder(x), np.polyder(y)
+    ddx, ddy = np.polyder(dx), np.polyder(dy)
+
+    def norm(t):
+        return np.sqrt(np.polyval(x, t) ** 2 + np.polyval(y, t) ** 2 + SMOOTHING**2)
+
+    def delta(t):
+        return norm(t) - CLEARANCE
+
+    def rate(t):
+        return (np.polyval(x, t) * np.polyval(dx, t) + np.polyval(y, t) * np.polyval(dy, t)) / norm(
+            t
+        )
+
+    def acceleration(t):
+        speed2 = np.polyval(dx, t) ** 2 + np.polyval(dy, t) ** 2
+        curv = np.polyval(x, t) * np.polyval(ddx, t) + np.polyval(y, t) * np.polyval(ddy, t)
+        return (speed2 + curv - rate(t) ** 2) / norm(t)
+
+    return delta, rate, acceleration
 
 
-@pytest.mark.parametrize("t0", [0.0, 2e-7])
-def test_step_interpolant_finds_onset_and_interior_peak_of_a_cubic_exactly(t0):
-    h = 1.6e-6
-    path = _StepPenetration(_cubic(t0), _RATE(t0), _cubic(t0 + h), _RATE(t0 + h), h)
-    # Onset: δ = 0 at the root of the cubic (numpy's polynomial root, independent).
-    roots = np.roots([-1e12, 2e6, 4.0, -1e-6])
-    t_on = float(roots[np.isreal(roots) & (roots.real > t0) & (roots.real < t0 + h)][0].real)
-    s_on = float(path.crossing(0.0))
-    np.testing.assert_allclose(t0 + s_on * h, t_on, rtol=1e-10)
-    # Peak of δ̇: where δ̈ = 4e6 − 6e12 t = 0.
-    t_peak = 4e6 / 6e12
-    assert t0 < t_peak < t0 + h
-    np.testing.assert_allclose(float(path.max_rate(s_on)), float(_RATE(t_peak)), rtol=1e-12)
+@pytest.mark.parametrize("t0", [0.0, 1e-7])
+def test_onset_and_peak_after_the_centre_are_those_of_the_exact_path(t0):
+    delta, rate, acceleration = _exact()
+    t_centre = brentq(lambda t: np.polyval(X, t), 0.0, H)
+    t_on = brentq(lambda t: delta(t) - LEVEL, t_centre, t0 + H, xtol=1e-22, rtol=1e-15)
+    t_peak = brentq(acceleration, t_on, t0 + H, xtol=1e-22, rtol=1e-15)
+    assert t0 < t_centre < t_on < t_peak < t0 + H  # the case is what it claims
+    assert rate(t0) < 0.0 < rate(t_on) < rate(t_peak)
+
+    path = _path(t0)
+    s_on = float(path.crossing(LEVEL))
+    np.testing.assert_allclose(t0 + s_on * H, t_on, rtol=1e-10)
+    np.testing.assert_allclose(float(path.rate(s_on)), rate(t_on), rtol=1e-10)
+    s_peak, inside = path.peak(s_on)
+    assert bool(inside)
+    np.testing.assert_allclose(t0 + float(s_peak) * H, t_peak, rtol=1e-8)
+    np.testing.assert_allclose(float(path.max_rate(s_on)), rate(t_peak), rtol=1e-12)
     # From after the peak, the maximum is at the interval's start.
-    s_late = (t_peak - t0) / h + 0.1
+    s_late = (t_peak - t0) / H + 0.05
+    np.testing.assert_allclose(float(path.max_rate(s_late)), rate(t0 + s_late * H), rtol=1e-12)
+    assert not bool(path.peak(s_late)[1])
+
+
+def test_onset_on_a_straight_line_through_the_centre_is_the_exact_crossing_time():
+    """e(t) = e₀ + v t through the centre (miss distance 10 nm): |e(t)| = c + level has the
+    closed-form root t = (−e₀·v + sqrt((e₀·v)² − |v|²(|e₀|² − ρ²)))/|v|², and δ̇ = v·e/|e|
+    rises monotonically after the centre, so its maximum over the contact is at the step's end."""
+    e0, v = np.array([1.39e-7, 1e-8]), np.array([-0.894, 0.0])
+    rho = CLEARANCE + LEVEL
+    ev, vv = e0 @ v, v @ v
+    t_on = (-ev + np.sqrt(ev**2 - vv * (e0 @ e0 - rho**2))) / vv
+    e_on = e0 + v * t_on
+    x, y = np.array([0.0, 0.0, v[0], e0[0]]), np.array([0.0, 0.0, v[1], e0[1]])
+    path = _path(0.0, x, y)
+    np.testing.assert_allclose(float(path.crossing(LEVEL)) * H, t_on, rtol=1e-12)
     np.testing.assert_allclose(
-        float(path.max_rate(s_late)), float(_RATE(t0 + s_late * h)), rtol=1e-12
+        float(path.rate(path.crossing(LEVEL))), v @ e_on / np.linalg.norm(e_on), rtol=1e-12
     )
+    e1 = e0 + v * H
+    np.testing.assert_allclose(float(path.max_rate(0.0)), v @ e1 / np.linalg.norm(e1), rtol=1e-12)
+    assert not bool(path.peak(0.0)[1])
 
 
-def test_a_step_too_short_to_resolve_delta_adds_no_interior_peak():
+def test_onset_and_v_minus_have_the_derivatives_of_the_exact_path_and_finite_ones_at_the_centre():
+    """d(t_on)/d(X₀) (the cubic coefficient) from the interpolant equals a central difference
+    of the independent brentq root; from exactly e = 0 (a centred journal) gradients are finite."""
+    delta, _, _ = _exact()
+
+    def t_on_exact(b):
+        x = X.copy()
+        x[0] = b
+        d, _, _ = _exact(x)
+        return brentq(lambda t: d(t) - LEVEL, 1e-6, H, xtol=1e-22, rtol=1e-15)
+
+    def t_on(b):
+        return H * _path(0.0, jnp.array(X).at[0].set(b), Y).crossing(LEVEL)
+
+    step = 1e6
+    fd = (t_on_exact(X[0] + step) - t_on_exact(X[0] - step)) / (2 * step)
+    np.testing.assert_allclose(float(jax.grad(t_on)(X[0])), fd, rtol=1e-6)
+
+    def v_minus(e0, rate0):
+        path = StepEccentricity(e0, rate0, e0 + H * rate0, rate0, H, CLEARANCE, SMOOTHING)
+        return path.max_rate(path.crossing(LEVEL))
+
+    zero, speed = jnp.zeros(2), jnp.array([0.894, 0.0])
+    grads = jax.grad(v_minus, argnums=(0, 1))(zero, speed)
+    assert all(np.all(np.isfinite(np.asarray(g))) for g in grads)
+    np.testing.assert_allclose(float(v_minus(zero, speed)), 0.894, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(grads[1]), [1.0, 0.0], atol=1e-9)
+
+
+def test_a_step_too_short_to_resolve_e_adds_no_interior_peak():
     """A 4e-19 s step that landed on a requested output time (Dopri8 with `step_ts` on
-    slider_crank): δ₁ − δ₀ = 2.8e-17 m is round-off of world positions ~0.1 m, and
-    (δ₁ − δ₀)/h = 64 m/s once made v⁻ = 95 m/s in a 1.09 m/s contact. The interpolant must
+    slider_crank): e₁ − e₀ = 2.8e-17 m is round-off of world positions ~0.1 m, and
+    (e₁ − e₀)/h = 64 m/s once made v⁻ = 95 m/s in a 1.09 m/s contact. The interpolant must
     then not invent a rate beyond its end values."""
     d0, r0 = 1.1362057218265828e-05, 1.091997004573437
     d1, r1 = 1.1362057218293584e-05, 1.0919970045734377
     roundoff = 16 * np.finfo(float).eps * 0.2
-    path = _StepPenetration(d0, r0, d1, r1, 4.336808689942018e-19, roundoff)
+    c = 2.5e-4
+    e0, e1 = jnp.array([c + d0, 0.0]), jnp.array([c + d1, 0.0])
+    path = StepEccentricity(
+        e0, jnp.array([r0, 0.0]), e1, jnp.array([r1, 0.0]), 4.336808689942018e-19, c,
+        SMOOTHING, roundoff,
+    )  # fmt: skip
     assert float(path.max_rate(0.0)) == pytest.approx(max(r0, r1), rel=1e-15)
-    # A step long enough to resolve δ keeps the cubic (and its interior peak): the exact
-    # cubic of the test above, with the same round-off level.
-    h = 1.6e-6
-    exact = _StepPenetration(_cubic(0.0), _RATE(0.0), _cubic(h), _RATE(h), h, roundoff)
-    np.testing.assert_allclose(float(exact.max_rate(0.0)), float(_RATE(4e6 / 6e12)), rtol=1e-12)
+    # A step long enough to resolve e keeps the cubic (and its interior peak), at the same
+    # round-off level.
+    _, rate, acceleration = _exact()
+    t_peak = brentq(acceleration, 8e-6, H, xtol=1e-22, rtol=1e-15)
+    np.testing.assert_allclose(float(_path(0.0, roundoff=roundoff).max_rate(0.0)), rate(t_peak),
+                               rtol=1e-12)  # fmt: skip

@@ -233,12 +233,6 @@ def _rebound_speed(params_vector):
     return traj.v[-1, 0]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="open bug (docs/robustness.md, diagnosis of E = 1 GPa): v⁻ is read off the step's "
-    "cubic Hermite interpolant of δ = |e| − c, which has a kink where the journal passes the "
-    "bearing's centre; a step holding both the centre and the onset overestimates v⁻",
-)
 def test_approach_speed_is_right_when_the_onset_step_also_crosses_the_centre():
     # A journal 0.139 µm from the centre flies through it at 0.894 m/s towards the far side:
     # the first step (10 µs) crosses the centre (δ̇ jumps from −v to +v there) and the rough

@@ -36,10 +36,12 @@ are identical (same for the bearing).
 **v⁻ memory** — Exudyn has no memory variable for a user-function force, so it is kept in
 Python and updated by a `PostStepUserFunction` (called once after every accepted step, with
 the state at the step's end) with exactly the update of
-`RevoluteClearance.memory_after_step`: δ over the step is the cubic Hermite interpolant of the
-end values (δ, δ̇); a contact beginning inside the step counts from the onset located on it,
-and v⁻ is the running maximum of δ̇ over the contact including the interpolant's interior
-peak; outside contact v⁻ holds max(δ̇, 0) of the last step end. The force uses
+`RevoluteClearance.memory_after_step`: the eccentricity e over the step is the cubic Hermite
+interpolant of the end values (e, ė), and δ = |e| − c, δ̇ = ė·e/|e| on it; a contact beginning
+inside the step counts from the onset located on it, and v⁻ is the running maximum of δ̇ over
+the contact including the interpolant's interior peak; outside contact v⁻ holds max(δ̇, 0) of
+the last step end. (Not jaxdeploy's guard for steps too short to resolve e, ~1e-19 s, which
+fixed steps never take.) The force uses
 max(v⁻, δ̇) as ours. So the discrete model — not only the continuous one — is the same as
 jaxdeploy's for a given step sequence. Differences that remain: Exudyn's generalized-α
 (index 3, Arnold & Brüls 2007, Chung–Hulbert coefficients from the spectral radius ρ∞) uses
@@ -111,42 +113,79 @@ def exudyn_version() -> str:
     return exudyn.__version__
 
 
-class _HermiteStep:
-    """δ over one step as the cubic Hermite interpolant of `(δ₀, δ̇₀)`, `(δ₁, δ̇₁)`, s ∈ [0, 1]
-    (the interpolant of `jaxdeploy.mechanism.clearance`, written again in numpy):
-    δ̇(s) = a + (6D − 4a − 2b) s + (3a + 3b − 6D) s², a = δ̇₀, b = δ̇₁, D = (δ₁ − δ₀)/h."""
+_GRID, _NEWTON = 16, 10  # as jaxdeploy.mechanism._step_eccentricity
 
-    def __init__(self, delta0, rate0, delta1, rate1, step):
-        mean = (delta1 - delta0) / step
-        self.delta0, self.delta1, self.rate0, self.step = delta0, delta1, rate0, step
-        self.c1 = 6.0 * mean - 4.0 * rate0 - 2.0 * rate1
-        self.c2 = 3.0 * rate0 + 3.0 * rate1 - 6.0 * mean
 
-    def rate(self, s):
-        return self.rate0 + self.c1 * s + self.c2 * s * s
+class _EccentricityStep:
+    """e over one step as the cubic Hermite interpolant of `(e₀, ė₀)`, `(e₁, ė₁)`, s ∈ [0, 1],
+    with δ = |e|_ε − c and δ̇ = ė·e/|e|_ε on it; the onset (last upward crossing of δ = level)
+    and the peak of δ̇ bracketed on 17 samples and refined by a safeguarded Newton iteration
+    (`jaxdeploy.mechanism._step_eccentricity.StepEccentricity`, written again in plain Python
+    for the post-step function):
+
+        e(s) = e₀ + h (a s + c₁ s²/2 + c₂ s³/3),   c₁ = 6m − 4a − 2b,   c₂ = 3a + 3b − 6m,
+        a = ė₀, b = ė₁, m = (e₁ − e₀)/h."""
+
+    def __init__(self, e0, rate0, e1, rate1, step, clearance):
+        mean = [(e1[i] - e0[i]) / step for i in range(2)]
+        self.e0, self.a, self.h, self.clearance = e0, rate0, step, clearance
+        self.c1 = [6.0 * mean[i] - 4.0 * rate0[i] - 2.0 * rate1[i] for i in range(2)]
+        self.c2 = [3.0 * rate0[i] + 3.0 * rate1[i] - 6.0 * mean[i] for i in range(2)]
+
+    def _derivatives(self, s):
+        h, a, c1, c2 = self.h, self.a, self.c1, self.c2
+        u = [self.e0[i] + h * (a[i] * s + c1[i] * s * s / 2 + c2[i] * s**3 / 3) for i in range(2)]
+        u1 = [h * (a[i] + c1[i] * s + c2[i] * s * s) for i in range(2)]
+        u2 = [h * (c1[i] + 2.0 * c2[i] * s) for i in range(2)]
+        u3 = [2.0 * h * c2[i] for i in range(2)]
+        return u, u1, u2, u3
+
+    @staticmethod
+    def _dot(x, y):
+        return x[0] * y[0] + x[1] * y[1]
+
+    def _radius(self, u):
+        return math.sqrt(self._dot(u, u) + ECCENTRICITY_SMOOTHING**2)
 
     def penetration(self, s):
-        return self.delta0 + self.step * (
-            self.rate0 * s + self.c1 * s * s / 2.0 + self.c2 * s**3 / 3.0
-        )
+        return self._radius(self._derivatives(s)[0]) - self.clearance
+
+    def rate(self, s):
+        u, u1, _, _ = self._derivatives(s)
+        return self._dot(u, u1) / (self.h * self._radius(u))
 
     def crossing(self, level):
-        """s where δ(s) = level (δ₀ ≤ level < δ₁): linear estimate, then Newton on the cubic."""
-        rise = self.delta1 - self.delta0
-        s = min(max((level - self.delta0) / rise if rise > 0 else 0.0, 0.0), 1.0)
-        for _ in range(3):
-            slope = self.step * self.rate(s)
-            if slope > 0:
-                s = min(max(s - (self.penetration(s) - level) / slope, 0.0), 1.0)
-        return s
+        """s where δ(s) rises through `level` for the last time (δ₀ ≤ level < δ₁)."""
+        k = max([j for j in range(_GRID) if self.penetration(j / _GRID) <= level], default=0)
+        lo, hi = k / _GRID, (k + 1) / _GRID
+        x = 0.5 * (lo + hi)
+        for _ in range(_NEWTON + 1):
+            f = self.penetration(x) - level
+            u, u1, _, _ = self._derivatives(x)
+            slope = self._dot(u, u1) / self._radius(u)
+            lo, hi = (x, hi) if f <= 0 else (lo, x)
+            newton = x - f / slope if slope > 0 else -1.0
+            x = newton if lo < newton < hi else 0.5 * (lo + hi)
+        return x
 
     def max_rate(self, s_start):
-        best = max(self.rate(s_start), self.rate(1.0))
-        if self.c2 < 0:
-            vertex = -self.c1 / (2.0 * self.c2)
-            if s_start < vertex < 1.0:
-                best = max(best, self.rate(vertex))
-        return best
+        """max of δ̇ over [s_start, 1]: the samples, refined by Newton on δ̈ = 0 around the
+        largest."""
+        samples = [s_start + (1.0 - s_start) * j / _GRID for j in range(_GRID + 1)]
+        rates = [self.rate(s) for s in samples]
+        k = max(range(_GRID + 1), key=rates.__getitem__)
+        lo, hi, x = samples[max(k - 1, 0)], samples[min(k + 1, _GRID)], samples[k]
+        for _ in range(_NEWTON):
+            u, u1, u2, u3 = self._derivatives(x)
+            r = self._radius(u)
+            a0, a1 = self._dot(u, u1), self._dot(u1, u1) + self._dot(u, u2)
+            a2 = 3.0 * self._dot(u1, u2) + self._dot(u, u3)
+            slope = a1 / r - a0**2 / r**3
+            curvature = a2 / r - 3.0 * a0 * a1 / r**3 + 3.0 * a0**3 / r**5
+            lo, hi = (x, hi) if slope > 0 else (lo, x)
+            newton = x - slope / curvature if curvature < 0 else -1.0
+            x = newton if lo < newton < hi else 0.5 * (lo + hi)
+        return max(rates[k], self.rate(x))
 
 
 @dataclass
@@ -368,12 +407,15 @@ class ExudynSliderCrank:
         return e, e_dot
 
     def _reset_memory(self):
-        delta, rate, _ = self.geometry(*self.eccentricity(self.q0, self.v0))
+        e, e_dot = self.eccentricity(self.q0, self.v0)
+        delta, rate, _ = self.geometry(e, e_dot)
         self.memory = {
             "in_contact": delta > 0.0,
             "impact_velocity": max(rate, 0.0),
             "penetration": delta,
             "penetration_rate": rate,
+            "eccentricity": e,
+            "eccentricity_rate": e_dot,
             "time": 0.0,
         }
         self.contact_history = []
@@ -384,20 +426,28 @@ class ExudynSliderCrank:
         current = self.exu.ConfigurationType.Current
         q = mbs.systemData.GetODE2Coordinates(configuration=current)
         v = mbs.systemData.GetODE2Coordinates_t(configuration=current)
-        delta, rate, _ = self.geometry(*self.eccentricity(q, v))
+        e, e_dot = self.eccentricity(q, v)
+        delta, rate, _ = self.geometry(e, e_dot)
         m = self.memory
         step = t - m["time"]
-        if step > 0.0:
-            path = _HermiteStep(m["penetration"], m["penetration_rate"], delta, rate, step)
+        now_in = delta > 0.0
+        # The interpolant matters only for a step that is in contact at one of its ends (else
+        # v⁻ = max(δ̇, 0) at the end): skipping it elsewhere keeps the peer's cost its own.
+        if step > 0.0 and (m["in_contact"] or now_in):
+            path = _EccentricityStep(
+                m["eccentricity"], m["eccentricity_rate"], e, e_dot, step, self.clearance
+            )
             s_on = 0.0 if m["in_contact"] else path.crossing(0.0)
             held = m["impact_velocity"] if m["in_contact"] else 0.0
-            now_in = delta > 0.0
             if m["in_contact"] and not now_in:  # a contact ended inside this step
                 self.contact_history.append((t, max(held, path.max_rate(0.0))))
             v_minus = max(held, path.max_rate(s_on)) if now_in else rate
             m["impact_velocity"] = max(v_minus, 0.0)
             m["in_contact"] = now_in
+        elif step > 0.0:
+            m["impact_velocity"] = max(rate, 0.0)
         m["penetration"], m["penetration_rate"], m["time"] = delta, rate, t
+        m["eccentricity"], m["eccentricity_rate"] = e, e_dot
         self._memory_changed()
         return True
 

@@ -36,9 +36,11 @@ lumping of the contact around the circumference (docs/contact.md); it does not r
 their derivative across e is of order χ (F_e(δ) + F_e(δ')) |ė| / (v⁻ |e|), zero for a journal
 at rest, and inside |e| ≲ ε (where n shrinks to 0) they are regularised on the scale ε.
 
-Memory (only for laws that need the impact velocity v⁻): `in_contact`, `impact_velocity` and
-`penetration`, updated after each accepted step. v⁻ is the **largest approach speed of the
-current contact**, a continuous-time definition that no step sequence changes:
+Memory (only for laws that need the impact velocity v⁻): `in_contact`, `impact_velocity`,
+`eccentricity` and `eccentricity_rate` (e, ė at the last step's end), `penetration`,
+`penetration_rate` and `event_fraction`, updated after each accepted step. v⁻ is the **largest
+approach speed of the current contact**, a continuous-time definition that no step sequence
+changes:
 
     v⁻(t) = max_{s ∈ [t_on, t]} δ̇(s),      t_on = the onset (δ crosses the law's onset upward)
 
@@ -54,14 +56,17 @@ damping ratio χ δ̇/v⁻ stays ≤ χ while approaching and the rebound is cal
 actually reached (a v⁻ held at its onset value 0 gave a damping term thousands of times too
 large and captured a 10 m/s impact).
 
-Discretely, after each accepted step δ(t) is the cubic Hermite interpolant of the step's end
-values (δ, δ̇): the onset is located on it (where taking δ̇ at the step's start would be an
-O(h) error) and the running maximum includes the interpolant's maximum inside the step (an
-interior peak missed between step ends would be O(h²)). For a smooth δ(t) these are
-O(h⁴)-accurate, but inside a step that crosses a Hertz onset δ(t) carries a (t − t_on)^3.5 term
-that no cubic follows, and at an interior peak the force's dependence on max(v⁻, δ̇) has a kink:
-the interpolated v⁻ then errs by an amount the step length sets and no error estimate sees
-(measured on slider_crank: a tighter tolerance stopped improving the solution at ~1e-6 of c).
+Discretely, after each accepted step e(t) is the cubic Hermite interpolant of the step's end
+values (e, ė), and δ(t) = |e(t)|_ε − c, δ̇ = ė·e/|e|_ε on it (`_step_eccentricity`; not a
+Hermite of δ itself, which has a kink at the bearing's centre where δ̇ jumps from −|ė| to +|ė|:
+a step holding both the centre passage and a far-side onset then overestimated v⁻ by 46 %).
+The onset is located on it (where taking δ̇ at the step's start would be an O(h) error) and the
+running maximum includes the interpolant's maximum inside the step (an interior peak missed
+between step ends would be O(h²)). For a smooth e(t) these are O(h⁴)-accurate, but inside a
+step that crosses a Hertz onset δ(t) carries a (t − t_on)^3.5 term that no cubic follows, and
+at an interior peak the force's dependence on max(v⁻, δ̇) has a kink: the interpolated v⁻
+errs by an amount the step length sets and no error estimate sees (measured on slider_crank:
+a tighter tolerance stopped improving the solution at ~1e-6 of c).
 So the memory also records `event_fraction`, where in the step the onset or a v⁻-raising peak
 fell, and adaptive runs redo such a step to end just past the event
 (`jaxdeploy.solvers.LocateEvents`): v⁻ is then taken where the interpolant is exact to round-off.
@@ -75,6 +80,7 @@ import jax.numpy as jnp
 
 from .._validation import check_positive
 from ._fields import param, static
+from ._step_eccentricity import StepEccentricity
 from .bodies import Kinematics, perp
 from .element import AbstractElement, Wrench
 from .joints import PointRef, Revolute
@@ -105,6 +111,10 @@ class ClearanceGeometry:
             joint.bearing_body, qi
         )
         self.eccentricity = e
+        # ė = ṙ_Pj − ṙ_Pi; δ̇ = ė·n (= v·n: the contact points' rotation terms are along t).
+        self.eccentricity_rate = kin.velocity(
+            joint.journal_body, joint.journal_point
+        ) - kin.velocity(joint.bearing_body, joint.bearing_point)
         self.normal, self.tangent = n, t
         self.penetration = norm_e - joint.clearance
         self.penetration_rate = jnp.dot(v, n)
@@ -120,63 +130,6 @@ class ClearanceGeometry:
         self.far_penetration_rate = -self.penetration_rate
         self.far_sliding_velocity = -jnp.dot(v_far, t)
         self.far_contact_point_bearing, self.far_contact_point_journal = qi_far, qj_far
-
-
-class _StepPenetration:
-    """δ over one step as the cubic Hermite interpolant of its end values `(δ₀, δ̇₀)`,
-    `(δ₁, δ̇₁)`, s = (t − t₀)/h ∈ [0, 1] (δ̇ = d|e|/dt exactly, since the contact points'
-    rotation terms are normal to n). Its rate is the quadratic
-
-        δ̇(s) = a + (6D − 4a − 2b) s + (3a + 3b − 6D) s²,   a = δ̇₀, b = δ̇₁, D = (δ₁ − δ₀)/h.
-
-    D carries δ's round-off (`roundoff`, m) divided by h. A step that lands on a requested
-    time can be 1e-19 s long, and there D was pure round-off: (δ₁ − δ₀)/h = 3e-17 m / 4e-19 s
-    = 64 m/s made v⁻ = 95 m/s in a 1 m/s impact (slider_crank, Dopri8 with `step_ts`). Where
-    that round-off exceeds 1e-6 of the end speeds, D is the trapezoid value (a + b)/2: δ̇ is
-    then linear over the step, without an interior extremum — nothing a step that short can
-    resolve is lost.
-    """
-
-    def __init__(self, delta0, rate0, delta1, rate1, step, roundoff=0.0):
-        self.delta0, self.delta1 = delta0, delta1
-        self.rate0 = rate0
-        trusted = roundoff < 1e-6 * step * (jnp.abs(rate0) + jnp.abs(rate1))
-        mean = jnp.where(
-            trusted, (delta1 - delta0) / jnp.where(trusted, step, 1.0), 0.5 * (rate0 + rate1)
-        )
-        self.step = step
-        self.c1 = 6.0 * mean - 4.0 * rate0 - 2.0 * rate1
-        self.c2 = 3.0 * rate0 + 3.0 * rate1 - 6.0 * mean
-
-    def rate(self, s):
-        return self.rate0 + self.c1 * s + self.c2 * s**2
-
-    def penetration(self, s):
-        return self.delta0 + self.step * (self.rate0 * s + self.c1 * s**2 / 2 + self.c2 * s**3 / 3)
-
-    def crossing(self, level):
-        """The s ∈ [0, 1] where δ(s) = `level` (δ₀ ≤ level < δ₁): the linear estimate refined
-        by Newton on the cubic."""
-        rise = self.delta1 - self.delta0
-        s = jnp.clip((level - self.delta0) / jnp.where(rise > 0, rise, 1.0), 0.0, 1.0)
-        for _ in range(3):
-            slope = self.step * self.rate(s)
-            s = s - (self.penetration(s) - level) / jnp.where(slope > 0, slope, jnp.inf)
-            s = jnp.clip(s, 0.0, 1.0)
-        return s
-
-    def peak(self, s_start):
-        """`(s, inside)`: the vertex of the parabola δ̇(s), and whether it is a maximum of δ̇
-        strictly inside (s_start, 1)."""
-        vertex = -self.c1 / jnp.where(self.c2 < 0, 2.0 * self.c2, -1.0)
-        inside = (self.c2 < 0) & (vertex > s_start) & (vertex < 1.0)
-        return jnp.clip(vertex, 0.0, 1.0), inside
-
-    def max_rate(self, s_start):
-        """max of δ̇(s) over s ∈ [s_start, 1]: the ends, or the parabola's vertex inside."""
-        vertex, inside = self.peak(s_start)
-        ends = jnp.maximum(self.rate(s_start), self.rate(1.0))
-        return jnp.where(inside, jnp.maximum(ends, self.rate(vertex)), ends)
 
 
 class RevoluteClearance(AbstractElement):
@@ -232,28 +185,33 @@ class RevoluteClearance(AbstractElement):
             "impact_velocity": jnp.maximum(g.penetration_rate, 0.0),
             "penetration": g.penetration,
             "penetration_rate": g.penetration_rate,
+            "eccentricity": g.eccentricity,
+            "eccentricity_rate": g.eccentricity_rate,
             "event_fraction": jnp.ones_like(g.penetration),
         }
 
     def memory_after_step(self, memory, kin: Kinematics, step):
         """Update v⁻ after an accepted step of length `step` that ended at `kin` (module
-        docstring). `penetration` and `penetration_rate` record δ and δ̇ at the step's end, the
-        start values of the next step."""
+        docstring). `eccentricity` and `eccentricity_rate` record e and ė at the step's end, the
+        start values of the next step's interpolant; `penetration` and `penetration_rate` the δ
+        and δ̇ there (outputs)."""
         if not self.has_memory:
             return memory
         g = self.geometry(kin)
         onset = self._onset()
-        # δ = |r_Pj − r_Pi| − c is a difference of world positions: its round-off is a few
-        # ulps of their magnitude.
+        # e = r_Pj − r_Pi is a difference of world positions: its round-off is a few ulps of
+        # their magnitude.
         magnitude = jnp.linalg.norm(g.contact_point_bearing) + jnp.linalg.norm(
             g.contact_point_journal
         )
-        path = _StepPenetration(
-            memory["penetration"],
-            memory["penetration_rate"],
-            g.penetration,
-            g.penetration_rate,
+        path = StepEccentricity(
+            memory["eccentricity"],
+            memory["eccentricity_rate"],
+            g.eccentricity,
+            g.eccentricity_rate,
             step,
+            self.clearance,
+            self.eccentricity_smoothing,
             roundoff=16.0 * jnp.finfo(g.penetration.dtype).eps * magnitude,
         )
         was_in = memory["in_contact"] > 0.5
@@ -273,6 +231,8 @@ class RevoluteClearance(AbstractElement):
             "impact_velocity": jnp.maximum(jnp.where(now_in, running_max, g.penetration_rate), 0.0),
             "penetration": g.penetration,
             "penetration_rate": g.penetration_rate,
+            "eccentricity": g.eccentricity,
+            "eccentricity_rate": g.eccentricity_rate,
             "event_fraction": jnp.where(now_in, event, 1.0),
         }
 
