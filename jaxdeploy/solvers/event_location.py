@@ -3,18 +3,18 @@ joint's contact onset, or a peak of its approach speed that raises v⁻) falls i
 so that it ends just past the event.
 
 Why. A clearance joint's damping needs v⁻, the approach speed at contact onset, which is memory
-taken after each accepted step from the step's cubic Hermite interpolant of δ
-(`jaxdeploy.mechanism.clearance`). Inside a step that crosses the onset, δ(t) is not a
-polynomial: a Hertz force K δ^1.5 adds a term ∝ (t − t_on)^3.5, so the interpolated onset speed
-carries an error ∝ (K/m) v^1.5 (h_c)^2.5, where h_c is the part of the step spent in contact.
-No step-size controller sees that error (it is in the memory, not in the state), so a tighter
-tolerance stops improving the solution at about that level (measured on slider_crank, docs/
-performance.md). Ending the step just past the onset makes h_c a small fraction of the step
-and the memory error negligible: the usual remedy for a discontinuity inside a step, locating
-it and stepping onto it (Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.6, "dense output and
-discontinuities"; Shampine & Thompson, *Appl. Numer. Math.* 36 (2001) 403, event location in
-ODE solvers). Unlike a terminal event with a restart, the solver never stops: the step is
-rejected and retried with the length that ends at the located event.
+taken after each accepted step from δ = |e| − c on the step's cubic Hermite interpolant of the
+eccentricity e (`jaxdeploy.mechanism.clearance`). Inside a step that crosses the onset, δ(t) is
+not that interpolant's: a Hertz force K δ^1.5 adds a term ∝ (t − t_on)^3.5, so the interpolated
+onset speed carries an error ∝ (K/m) v^1.5 (h_c)^2.5, where h_c is the part of the step spent in
+contact. No step-size controller sees that error (it is in the memory, not in the state), so a
+tighter tolerance stops improving the solution at about that level (measured on slider_crank,
+docs/ performance.md). Ending the step just past the onset makes h_c a small fraction of the
+step and the memory error negligible: the usual remedy for a discontinuity inside a step,
+locating it and stepping onto it (Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.6, "dense
+output and discontinuities"; Shampine & Thompson, *Appl. Numer. Math.* 36 (2001) 403, event
+location in ODE solvers). Unlike a terminal event with a restart, the solver never stops: the
+step is rejected and retried with the length that ends at the located event.
 
 Rule, with s the event (onset or peak) as a fraction of the step (`Mechanism.event_fraction`,
 located on the step's interpolant):
