@@ -1009,8 +1009,14 @@ both).
     print(f"wrote {DOC}")
 
 
+COMMANDS = ("impact", "diagnosis", "deploy", "diagnosis-deploy", "long", "docs", "all")
+
+
 def main(argv):
     what = argv[1] if len(argv) > 1 else "all"
+    if what not in COMMANDS:  # e.g. --help: say how, and write nothing
+        print(f"usage: python experiments/robustness.py {'|'.join(COMMANDS)}", file=sys.stderr)
+        return 0 if what in ("-h", "--help") else 2
     for family in ("impact", "deploy", "long"):
         if what in (family, "all"):
             run_family(family)
@@ -1022,4 +1028,4 @@ def main(argv):
 
 
 if __name__ == "__main__":
-    main(sys.argv)
+    sys.exit(main(sys.argv))

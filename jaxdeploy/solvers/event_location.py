@@ -9,7 +9,7 @@ not that interpolant's: a Hertz force K δ^1.5 adds a term ∝ (t − t_on)^3.5,
 onset speed carries an error ∝ (K/m) v^1.5 (h_c)^2.5, where h_c is the part of the step spent in
 contact. No step-size controller sees that error (it is in the memory, not in the state), so a
 tighter tolerance stops improving the solution at about that level (measured on slider_crank,
-docs/ performance.md). Ending the step just past the onset makes h_c a small fraction of the
+docs/performance.md). Ending the step just past the onset makes h_c a small fraction of the
 step and the memory error negligible: the usual remedy for a discontinuity inside a step,
 locating it and stepping onto it (Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.6, "dense
 output and discontinuities"; Shampine & Thompson, *Appl. Numer. Math.* 36 (2001) 403, event
