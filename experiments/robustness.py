@@ -855,6 +855,14 @@ def _deploy_energy_finding(deploy, diag):
     return text + "Use rtol ≤ 1e-7 where the energy balance matters to better than 1 %.\n"
 
 
+def _revision(versions):
+    """The code's git commit as recorded by `run_metadata` (results from before it: '?')."""
+    git = versions.get("git", "?")
+    if not isinstance(git, dict):
+        return "not from a git checkout" if git is None else "commit not recorded"
+    return f"git {git['commit'][:10]}" + (" (uncommitted changes)" if git["dirty"] else "")
+
+
 def write_docs():
     impact = _load("impact")
     deploy = _load("deploy")
@@ -868,7 +876,8 @@ def write_docs():
 
 Machine: {meta.get("machine", "?")}, {os.cpu_count()} cores (shared; wall times are noisy),
 Python {versions.get("python", "?")}, JAX {versions.get("jax", "?")},
-diffrax {versions.get("diffrax", "?")}, float64. Solver: generalized-α (ρ∞ = 0.8), adaptive.
+diffrax {versions.get("diffrax", "?")}, float64, code {_revision(versions)}. Solver:
+generalized-α (ρ∞ = 0.8), adaptive.
 
 ## What is checked, and against what
 
@@ -995,7 +1004,8 @@ property-tested with hypothesis over the scenes' whole parameter range and beyon
 
 Every result file is written through `jaxdeploy.io` (temporary file in the same folder,
 fsync, atomic rename, folder fsync; the result gets the permissions a plain write would give),
-beside the parameters, versions and seed (`null` where nothing random is drawn) of the run:
+beside the parameters, versions, the code's git commit and dirty flag (`null` when the package
+does not run from a git checkout) and seed (`null` where nothing random is drawn) of the run:
 `simulate` (summary.json), `sweep` (manifest.json), `optimize` (result.json), `fit`
 (fit.json), `bench` (work_precision.json). `summary.json` is written last and marks a complete
 result; with `--overwrite` the old one is deleted before anything new is written, so a rerun

@@ -1,11 +1,12 @@
 """Writing results so that a kill never leaves a half-written file, and a run records what
-produced it (parameters, versions)."""
+produced it (parameters, versions, the code's git revision)."""
 
 from __future__ import annotations
 
 import json
 import os
 import platform
+import subprocess
 import sys
 import tempfile
 
@@ -94,8 +95,49 @@ def atomic_write_npz(path: str, **arrays) -> None:
     atomic_write_bytes(path, buffer.getvalue())
 
 
+GIT_TIMEOUT = 5.0  # s; a hung git (network file system, lock) must not hold up a result
+
+
+def _git(args, folder):
+    """`git -C folder *args` stdout, or `None` if git is missing, fails or times out."""
+    try:
+        out = subprocess.run(
+            ["git", "-C", folder, *args],
+            capture_output=True,
+            text=True,
+            timeout=GIT_TIMEOUT,
+            check=True,
+            env={**os.environ, "GIT_OPTIONAL_LOCKS": "0"},  # `status` must not write the index
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout
+
+
+def code_revision(package_dir: str | None = None) -> dict | None:
+    """`{"commit": sha, "dirty": bool}` of the git checkout the package runs from, or `None`
+    when it does not run from one (an installed wheel, no git, git failing or slower than
+    `GIT_TIMEOUT`). The package counts as running from a checkout only if its own
+    `__init__.py` is tracked there: a wheel installed into a virtual environment that lives
+    inside some repository (`.venv` in a checkout) is not that repository's code. `dirty`:
+    tracked files differ from the commit (untracked files, e.g. results, are not counted).
+
+    **Arguments:**
+    - `package_dir`: the package folder (default: this package's).
+    """
+    folder = package_dir or os.path.dirname(os.path.abspath(__file__))
+    if _git(["ls-files", "--error-unmatch", "__init__.py"], folder) is None:
+        return None
+    commit = _git(["rev-parse", "HEAD"], folder)
+    status = _git(["status", "--porcelain", "--untracked-files=no"], folder)
+    if commit is None or status is None:
+        return None
+    return {"commit": commit.strip(), "dirty": bool(status.strip())}
+
+
 def run_metadata() -> dict:
-    """Versions and machine, stored beside every result."""
+    """Versions, machine and the code's git revision (`code_revision`), stored beside every
+    result."""
     import diffrax
     import equinox
     import jax
@@ -111,6 +153,7 @@ def run_metadata() -> dict:
         "python": sys.version.split()[0],
         "platform": platform.platform(),
         "devices": [str(d) for d in jax.devices()],
+        "git": code_revision(),
     }
 
 

@@ -3,6 +3,7 @@ extreme cases finish or say why not, and gradients stay finite at the special po
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -119,6 +120,60 @@ def test_a_crashed_rerun_cannot_pass_for_a_complete_result(tmp_path, monkeypatch
         main([*args, "--overwrite"])
     assert not (out / "summary.json").exists()
     assert _leftovers(out) == []
+
+
+def _git(folder, *args):
+    cmd = ["git", "-C", str(folder), "-c", "user.name=t", "-c", "user.email=t@t", *args]
+    return subprocess.run(cmd, capture_output=True, text=True, check=True).stdout.strip()
+
+
+@pytest.mark.skipif(shutil.which("git") is None, reason="git is not installed")
+def test_results_record_the_git_commit_and_dirty_flag_of_a_checkout_and_none_otherwise(
+    tmp_path, monkeypatch
+):
+    # A package tracked in a repository: its commit, clean, then dirty once a tracked file
+    # changes (an untracked file, e.g. a result, does not count).
+    repo, package = tmp_path / "repo", tmp_path / "repo" / "pkg"
+    package.mkdir(parents=True)
+    (package / "__init__.py").write_text("x = 1\n")
+    _git(repo, "init", "-q")
+    _git(repo, "add", "pkg/__init__.py")
+    _git(repo, "commit", "-q", "-m", "first")
+    commit = _git(repo, "log", "-1", "--format=%H")
+    (package / "result.json").write_text("{}")
+    assert io.code_revision(str(package)) == {"commit": commit, "dirty": False}
+    (package / "__init__.py").write_text("x = 2\n")
+    assert io.code_revision(str(package)) == {"commit": commit, "dirty": True}
+    # Not a checkout: a plain folder, and an untracked copy inside a repository (a wheel
+    # installed into a .venv that lives in a checkout).
+    plain = tmp_path / "site-packages" / "pkg"
+    plain.mkdir(parents=True)
+    (plain / "__init__.py").write_text("x = 1\n")
+    assert io.code_revision(str(plain)) is None
+    venv = repo / ".venv" / "pkg"
+    venv.mkdir(parents=True)
+    (venv / "__init__.py").write_text("x = 1\n")
+    assert io.code_revision(str(venv)) is None
+    # git missing or hanging: no revision, no error.
+    monkeypatch.setenv("PATH", str(tmp_path / "nowhere"))
+    assert io.code_revision(str(package)) is None
+    monkeypatch.undo()
+
+    def hanging(*args, **kwargs):
+        raise subprocess.TimeoutExpired(args[0], io.GIT_TIMEOUT)
+
+    monkeypatch.setattr(subprocess, "run", hanging)
+    assert io.code_revision(str(package)) is None
+    monkeypatch.undo()
+    # Every result's metadata carries it (None if these tests run against an installed wheel).
+    this = io.run_metadata()["git"]
+    here = os.path.dirname(os.path.abspath(io.__file__))
+    tracked = subprocess.run(["git", "-C", here, "ls-files", "--error-unmatch", "__init__.py"],
+                             capture_output=True).returncode == 0  # fmt: skip
+    if tracked:
+        assert this is not None and this["commit"] == _git(here, "log", "-1", "--format=%H")
+    else:
+        assert this is None
 
 
 def test_figures_are_written_atomically(tmp_path):
