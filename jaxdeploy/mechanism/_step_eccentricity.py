@@ -26,7 +26,7 @@ where that one was not. δ(s) and δ̇(s) are no longer a cubic and a parabola, 
 (δ = level) and the peak (δ̈ = 0) are found numerically: the step is sampled at `GRID` + 1
 points to bracket the last upward crossing and the largest δ̇, and a safeguarded Newton
 iteration (Newton inside the bracket, bisection when Newton leaves it; fixed `NEWTON`
-iterations, so it traces to straight-line code) refines the bracket to round-off. Derivatives
+iterations in a `lax.fori_loop`, without derivatives) refines the bracket to round-off. Derivatives
 with respect to the parameters: the onset is the root of δ(s) = level, so one Newton step
 from the (gradient-stopped) converged root carries the implicit-function derivative
 ds/dθ = −∂_θδ / δ'(s); at the peak δ̈ = 0, so v⁻ = δ̇(s_peak) needs no derivative of s_peak
@@ -101,57 +101,70 @@ class StepEccentricity:
 
     # --- events
 
+    def _frozen(self):
+        """This path with every input gradient-stopped: the bracketing and the Newton
+        iterations carry no derivative (module docstring), so no tangent enters their loops."""
+        frozen = object.__new__(StepEccentricity)
+        for name, value in vars(self).items():
+            setattr(frozen, name, jax.lax.stop_gradient(value))
+        return frozen
+
+    def _onset_slope(self, s):
+        """dδ/ds = u·u'/|u|_ε."""
+        u, u1, _, _ = self._derivatives(s)
+        return jnp.sum(u * u1, axis=-1) / self._radius(u)
+
     def crossing(self, level):
         """The s ∈ [0, 1] where δ(s) rises through `level` for the last time in the step
         (δ₀ ≤ level < δ₁; the onset of the contact current at the step's end)."""
+        frozen = self._frozen()
         samples = jnp.linspace(0.0, 1.0, GRID + 1)
-        below = jax.lax.stop_gradient(self.penetration(samples)) <= level
-        index = jnp.arange(GRID)
-        k = jnp.max(jnp.where(below[:-1], index, 0))
+        below = frozen.penetration(samples) <= level
+        k = jnp.max(jnp.where(below[:-1], jnp.arange(GRID), 0))
+
+        def newton_or_bisect(_, bracket):
+            lo, hi, x = bracket
+            f = frozen.penetration(x) - level
+            slope = frozen._onset_slope(x)
+            lo, hi = jnp.where(f <= 0, x, lo), jnp.where(f <= 0, hi, x)
+            newton = x - f / jnp.where(slope > 0, slope, jnp.inf)
+            ok = (slope > 0) & (newton > lo) & (newton < hi)
+            return lo, hi, jnp.where(ok, newton, 0.5 * (lo + hi))
+
         lo, hi = samples[k], samples[k + 1]
-
-        def excess(s):
-            return self.penetration(s) - level
-
-        def refine(lo, hi):
-            x = 0.5 * (lo + hi)
-            for _ in range(NEWTON):
-                f = excess(x)
-                u, u1, _, _ = self._derivatives(x)
-                slope = jnp.sum(u * u1) / self._radius(u)
-                lo, hi = jnp.where(f <= 0, x, lo), jnp.where(f <= 0, hi, x)
-                newton = x - f / jnp.where(slope > 0, slope, jnp.inf)
-                x = jnp.where((slope > 0) & (newton > lo) & (newton < hi), newton, 0.5 * (lo + hi))
-            return x
-
-        x = jax.lax.stop_gradient(refine(lo, hi))
+        _, _, x = jax.lax.fori_loop(0, NEWTON, newton_or_bisect, (lo, hi, 0.5 * (lo + hi)))
         # One Newton step from the converged root: the implicit derivative ds/dθ.
-        u, u1, _, _ = self._derivatives(x)
-        slope = jnp.sum(u * u1) / self._radius(u)
-        return jnp.clip(x - excess(x) / jnp.where(slope > 0, slope, jnp.inf), 0.0, 1.0)
+        slope = self._onset_slope(x)
+        step = (self.penetration(x) - level) / jnp.where(slope > 0, slope, jnp.inf)
+        return jnp.clip(x - step, 0.0, 1.0)
 
     def peak(self, s_start):
         """`(s, inside)`: the largest δ̇ over [s_start, 1], located on `GRID` + 1 samples and
         refined by Newton on δ̈ = 0 in the bracket around the largest sample; `inside`:
-        whether it is a maximum strictly inside (s_start, 1), above both ends."""
+        whether it is a maximum strictly inside (s_start, 1), above both ends. Carries no
+        derivative (at a maximum, v⁻ = δ̇(s) does not need one)."""
+        frozen = self._frozen()
         s_start = jax.lax.stop_gradient(s_start)
         samples = s_start + (1.0 - s_start) * jnp.linspace(0.0, 1.0, GRID + 1)
-        rates = jax.lax.stop_gradient(self.rate(samples))
+        rates = frozen.rate(samples)
         k = jnp.argmax(rates)
-        lo = samples[jnp.maximum(k - 1, 0)]
-        hi = samples[jnp.minimum(k + 1, GRID)]
-        x = samples[k]
-        for _ in range(NEWTON):
-            slope, curvature = jax.lax.stop_gradient(self._rate_slopes(x))
+
+        def newton_or_bisect(_, bracket):
+            lo, hi, x = bracket
+            slope, curvature = frozen._rate_slopes(x)
             # δ̇ still rising at x: the peak is beyond it; falling: before it.
             lo, hi = jnp.where(slope > 0, x, lo), jnp.where(slope > 0, hi, x)
             newton = x - slope / jnp.where(curvature < 0, curvature, -jnp.inf)
-            x = jnp.where((curvature < 0) & (newton > lo) & (newton < hi), newton, 0.5 * (lo + hi))
+            ok = (curvature < 0) & (newton > lo) & (newton < hi)
+            return lo, hi, jnp.where(ok, newton, 0.5 * (lo + hi))
+
+        bracket = (samples[jnp.maximum(k - 1, 0)], samples[jnp.minimum(k + 1, GRID)], samples[k])
+        _, _, x = jax.lax.fori_loop(0, NEWTON, newton_or_bisect, bracket)
         # Never worse than the best sample (a bracket without a sign change of δ̈ converges to
         # its end, which need not be a maximum).
-        x = jnp.where(jax.lax.stop_gradient(self.rate(x)) >= rates[k], x, samples[k])
+        x = jnp.where(frozen.rate(x) >= rates[k], x, samples[k])
         ends = jnp.maximum(rates[0], rates[-1])
-        inside = (x > s_start) & (x < 1.0) & (jax.lax.stop_gradient(self.rate(x)) > ends)
+        inside = (x > s_start) & (x < 1.0) & (frozen.rate(x) > ends)
         return x, inside
 
     def max_rate(self, s_start):

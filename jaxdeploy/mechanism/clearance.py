@@ -76,6 +76,7 @@ law).
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from .._validation import check_positive
@@ -216,24 +217,33 @@ class RevoluteClearance(AbstractElement):
         )
         was_in = memory["in_contact"] > 0.5
         now_in = g.penetration > onset
-        # A contact that began inside this step counts from its onset, located on the step.
-        s_on = jnp.where(was_in, 0.0, path.crossing(onset))
-        held = jnp.where(was_in, memory["impact_velocity"], 0.0)
-        running_max = jnp.maximum(held, path.max_rate(s_on))
-        # Events that set v⁻ inside the step, for adaptive runs to end a step on
-        # (`event_fraction`): the onset, and an interior peak of δ̇ that raised v⁻ (a contact
-        # the mechanism keeps driving in).
-        s_peak, has_peak = path.peak(s_on)
-        raised = has_peak & (path.rate(s_peak) > jnp.maximum(held, path.rate(s_on)))
-        event = jnp.minimum(jnp.where(was_in, 1.0, s_on), jnp.where(raised, s_peak, 1.0))
+
+        def in_contact_at_end():
+            # A contact that began inside this step counts from its onset, located on the step.
+            s_on = jnp.where(was_in, 0.0, path.crossing(onset))
+            held = jnp.where(was_in, memory["impact_velocity"], 0.0)
+            running_max = jnp.maximum(held, path.max_rate(s_on))
+            # Events that set v⁻ inside the step, for adaptive runs to end a step on
+            # (`event_fraction`): the onset, and an interior peak of δ̇ that raised v⁻ (a
+            # contact the mechanism keeps driving in).
+            s_peak, has_peak = path.peak(s_on)
+            raised = has_peak & (path.rate(s_peak) > jnp.maximum(held, path.rate(s_on)))
+            event = jnp.minimum(jnp.where(was_in, 1.0, s_on), jnp.where(raised, s_peak, 1.0))
+            return running_max, event
+
+        def out_of_contact_at_end():
+            return g.penetration_rate, jnp.ones_like(g.penetration)
+
+        # The interpolant's root and peak searches (µs per step) only where they matter.
+        v_minus, event = jax.lax.cond(now_in, in_contact_at_end, out_of_contact_at_end)
         return {
             "in_contact": jnp.where(now_in, 1.0, 0.0),
-            "impact_velocity": jnp.maximum(jnp.where(now_in, running_max, g.penetration_rate), 0.0),
+            "impact_velocity": jnp.maximum(v_minus, 0.0),
             "penetration": g.penetration,
             "penetration_rate": g.penetration_rate,
             "eccentricity": g.eccentricity,
             "eccentricity_rate": g.eccentricity_rate,
-            "event_fraction": jnp.where(now_in, event, 1.0),
+            "event_fraction": event,
         }
 
     def event_fraction(self, memory):
