@@ -22,7 +22,6 @@ from .mechanism import ConsistentState, Mechanism
 from .solvers import (
     GeneralizedAlpha,
     LocateEvents,
-    MechanismODESolver,
     MechanismState,
     MechanismTerm,
     solver_by_name,
@@ -34,8 +33,8 @@ from .solvers import (
 class StepControl:
     """How steps are chosen (static: changing it recompiles; the step `dt` itself is data).
 
-    Fixed step: no tolerances. Adaptive: `rtol` and `atol` (positions, m and rad) with
-    `dt_min`/`dt_max` as bounds.
+    Fixed step: no tolerances. Adaptive: `rtol` and `atol` (positions in m and rad, velocities
+    in m/s and rad/s) with `dt_min`/`dt_max` as bounds.
     """
 
     rtol: float | None = None
@@ -43,7 +42,7 @@ class StepControl:
     dt_min: float | None = None
     dt_max: float | None = None
     max_steps: int = 2_000_000
-    # Error norm; the ODE path uses `state_norm` (positions and velocities only).
+    # Error norm; `simulate` uses `state_norm` (positions and velocities only).
     norm: object = None
 
     @property
@@ -278,13 +277,13 @@ def simulate(
 
     **Arguments:**
     - `dt`: fixed step [s] (alone), or the first step of an adaptive run.
-    - `rtol`, `atol`: adaptive step on the solver's error estimate (positions).
+    - `rtol`, `atol`: adaptive step on the solver's error estimate (positions and velocities).
     - `n_save` / `ts`: output times (default: `n_save` equally spaced).
     - `solver`: a solver object, or a name from `jaxdeploy.solvers.SOLVER_NAMES`:
       `"generalized_alpha"` (the default, `GeneralizedAlpha(rho_inf=0.8)`), or a diffrax method
       (`"kvaerno5"`, `"kvaerno3"`, `"tsit5"`, `"dopri8"`, …) on the index-1 ODE with coordinate
       projection (`MechanismODESolver`); implicit ones take their Newton tolerances from
-      `rtol`/`atol`. With the ODE path the error norm covers positions and velocities.
+      `rtol`/`atol`.
     - `progress`: show a progress bar.
     - `step_ts`: times every adaptive run must step to exactly (e.g. `ts`, so that saved
       states are step end points rather than interpolated; used by the reference solutions).
@@ -316,8 +315,8 @@ def simulate(
     _check_step_control(rtol, atol, dt_min, dt_max, max_steps)
     if isinstance(solver, str):
         solver = solver_by_name(solver, rtol=rtol, atol=atol)
-    norm = state_norm if isinstance(solver, MechanismODESolver) else None
-    control = StepControl(rtol, atol, dt_min, dt_max, max_steps, norm)
+    # Both paths control the positions and velocities (the integrated variables) alone.
+    control = StepControl(rtol, atol, dt_min, dt_max, max_steps, state_norm)
     if dt is None and not control.adaptive:
         raise ValueError("give dt (fixed step) or rtol/atol (adaptive step)")
     if dt is None:

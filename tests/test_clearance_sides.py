@@ -186,8 +186,10 @@ def test_identical_to_the_single_point_model_where_the_far_side_is_inactive(elas
         init = consistent_state(
             mech, jnp.zeros(3), jnp.array([1.0, 0.2, 50.0]), fixed_velocities=(0, 1, 2)
         )
-        runs.append(simulate(mech, init, 6e-5, rtol=1e-8, atol=1e-13, dt_max=1e-6, n_save=11))
-    # The compiled runs add the (zero) far wrenches in another order: equal to round-off.
+        runs.append(simulate(mech, init, 6e-5, dt=2e-8, n_save=11))
+    # The compiled runs add the (zero) far wrenches in another order: equal to round-off. Fixed
+    # steps, because adaptive ones turn round-off in the error estimate into different (equally
+    # valid) step sequences, whose results differ by far more than round-off.
     np.testing.assert_allclose(np.asarray(runs[0].q), np.asarray(runs[1].q), rtol=1e-12, atol=0)
     assert float(np.min(np.asarray(runs[0].v[:, 0]))) < 0.0  # it did impact and rebound
 
