@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -196,6 +197,7 @@ def step_log(mechanism: Mechanism, memory) -> dict:
     return {k: float(log[k][-1]) for k in ("min_step", "max_step", "steps")}
 
 
+@eqx.filter_jit
 def energy_balance(mechanism: Mechanism, q, v, memory) -> dict:
     """Energy terms along saved states of a `metered` mechanism.
 
@@ -206,6 +208,10 @@ def energy_balance(mechanism: Mechanism, q, v, memory) -> dict:
     `injected` J, `residual` `T + V + D − T(0) − V(0) − J`, and per element index
     `dissipated_by` / `potential_of` / `injected_by` (dicts over element index). A clock
     body's kinetic energy is left out.
+
+    Compiled (`equinox.filter_jit`: once per mechanism composition and array shapes): run
+    eagerly, the vmapped energies dispatch hundreds of small operations, each compiled on
+    first use (~6 s for an impact scene on a 2-core CPU, against < 1 s compiled).
     """
     meters = [i for i, e in enumerate(mechanism.elements) if isinstance(e, EnergyMeter)]
 
