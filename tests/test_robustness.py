@@ -248,7 +248,8 @@ def test_extreme_impacts_complete_balance_energy_and_do_not_stall():
         ok = traj.result == dfx.RESULTS.successful
         return ok, traj.q, traj.v, traj.memory, traj.stats["num_rejected_steps"]
 
-    ok, q, v, memory, rejected = jax.vmap(run)(mechanism, initial)
+    # One compiled program (outside `jit` the batched set-up around the solve runs op by op).
+    ok, q, v, memory, rejected = jax.jit(jax.vmap(run))(mechanism, initial)
     for k, case in enumerate(EXTREME_IMPACTS):
         mech_k = cases[k][0]
         mem_k = jax.tree.map(lambda x, k=k: x[k], memory)
@@ -315,9 +316,9 @@ def test_gradients_finite_from_zero_eccentricity_through_contact_onset_and_rebou
     rebounds; the gradient with respect to every contact parameter is finite, and its signs are
     the physical ones: a higher restitution and a faster approach give a faster rebound."""
     x = jnp.array([1e-5, 1e-6, 0.7, 0.3])
-    grad = jax.grad(_rebound_speed)(x)
+    speed, grad = jax.jit(jax.value_and_grad(_rebound_speed))(x)  # one compiled program
     assert np.all(np.isfinite(np.asarray(grad))), grad
-    assert float(_rebound_speed(x)) < 0.0
+    assert float(speed) < 0.0
     assert float(grad[2]) < 0.0  # d(v_x)/d c_e: v_x = −(rebound speed), which grows with c_e
     assert float(grad[3]) < 0.0  # d(v_x)/d v0
 
@@ -337,13 +338,14 @@ def test_clearance_forces_have_finite_gradients_at_zero_eccentricity_and_sliding
         mech = Mechanism([body], [joint], {"B": (0.0, 0.0)})
         return mech.generalized_forces(q, v, 0.0, mech.init_memory(q, v))
 
+    # Compiled: run op by op, the first use of each operation compiles it (14 s against 4 s).
+    jacobians = jax.jit(jax.jacfwd(forces, argnums=(0, 1, 2)))
+    gradients = jax.jit(jax.grad(lambda q, v, c: jnp.sum(forces(q, v, c)), argnums=(0, 1, 2)))
     zero = jnp.zeros(3)
     for q in (zero, jnp.array([1e-5, 0.0, 0.0])):  # centred; exactly at the nominal surface
-        for jac in jax.jacfwd(forces, argnums=(0, 1, 2))(q, zero, 1e-5):
+        for jac in jacobians(q, zero, 1e-5):
             assert np.all(np.isfinite(np.asarray(jac)))
-        for g in jax.grad(lambda q, v, c: jnp.sum(forces(q, v, c)), argnums=(0, 1, 2))(
-            q, zero, 1e-5
-        ):
+        for g in gradients(q, zero, 1e-5):
             assert np.all(np.isfinite(np.asarray(g)))
 
 
@@ -366,10 +368,11 @@ def test_gradient_finite_across_latch_engagement():
         traj = simulate(mech, init, 1.5, dt=2e-3, n_save=2)
         return traj.q[-1, 2], traj.memory[2]["engaged"][-1]
 
+    # One compiled program gives the run's values (for the differences too) and its gradient.
+    angle_and_grad = jax.jit(jax.value_and_grad(final_angle, has_aux=True))
     x = jnp.array([1.0, 500.0])
-    (angle, engaged) = final_angle(x)
+    (angle, engaged), grad = angle_and_grad(x)
     assert float(engaged) == 1.0 and abs(float(angle) - 1.0) < 0.05
-    grad = jax.grad(lambda x: final_angle(x)[0])(x)
     assert np.all(np.isfinite(np.asarray(grad)))
     assert float(grad[1]) != 0.0  # the latch stiffness matters after engagement
     # Against central differences of the same fixed-step map (the engagement stays in the
@@ -377,7 +380,9 @@ def test_gradient_finite_across_latch_engagement():
     for k in range(2):
         step = 1e-6 * float(x[k])
         dx = jnp.zeros(2).at[k].set(step)
-        fd = (float(final_angle(x + dx)[0]) - float(final_angle(x - dx)[0])) / (2 * step)
+        (plus, _), _ = angle_and_grad(x + dx)
+        (minus, _), _ = angle_and_grad(x - dx)
+        fd = (float(plus) - float(minus)) / (2 * step)
         assert float(grad[k]) == pytest.approx(fd, rel=1e-5, abs=1e-9), k
 
 
@@ -423,8 +428,9 @@ def test_potential_energies_are_the_conservative_forces():
     memory = list(mech.init_memory(q, jnp.zeros(6)))
     memory[6] = {"engaged": jnp.asarray(1.0)}
     memory = tuple(memory)
-    forces = mech.generalized_forces(q, jnp.zeros(6), 0.0, memory)
-    grad_v = jax.grad(mech.potential_energy)(q, memory)
+    # Compiled (op by op each operation's first use compiles it).
+    forces = jax.jit(lambda q, m: mech.generalized_forces(q, jnp.zeros(6), 0.0, m))(q, memory)
+    grad_v = jax.jit(jax.grad(lambda q, m: mech.potential_energy(q, m)))(q, memory)
     np.testing.assert_allclose(np.asarray(forces), -np.asarray(grad_v), rtol=1e-10, atol=1e-9)
     assert float(elements[-1].potential_energy(mech.kinematics(q), None)) > 0.0
 
