@@ -52,6 +52,15 @@ def _forces(params, q, v, v_minus=0.3):
     return mech.generalized_forces(q, v, 0.0, memory)
 
 
+# Compiled once each and reused by every case below (run op by op, each operation's first use
+# compiled it: ~16 s for the first case).
+_forces_jit = jax.jit(_forces)
+_jacobians = {
+    "forward": jax.jit(jax.jacfwd(_forces, argnums=(0, 1, 2))),
+    "reverse": jax.jit(jax.jacrev(_forces, argnums=(0, 1, 2))),
+}
+
+
 def _central_jacobian(f, x, h):
     columns = []
     for k in range(x.size):
@@ -68,8 +77,13 @@ def test_centred_journal_has_no_force_and_the_closed_form_stiffness():
     q = jnp.zeros(3)
     memory = mech.init_memory(q, jnp.zeros(3))
     assert float(elastic.force(-C)) > 50.0  # the far side is far past its onset
-    np.testing.assert_array_equal(np.asarray(mech.generalized_forces(q, q, 0.0, memory)), 0.0)
-    jac = jax.jacfwd(lambda q: mech.generalized_forces(q, jnp.zeros(3), 0.0, memory))(q)
+
+    def forces(q):
+        return mech.generalized_forces(q, jnp.zeros(3), 0.0, memory)
+
+    # Compiled: op by op, each operation's first use compiles it.
+    np.testing.assert_array_equal(np.asarray(jax.jit(forces)(q)), 0.0)
+    jac = jax.jit(jax.jacfwd(forces))(q)
     expected = -2.0 * float(elastic.stiffness(-C))
     np.testing.assert_allclose(np.asarray(jac[:2, :2]), expected * np.eye(2), rtol=1e-9)
 
@@ -96,14 +110,16 @@ def test_forces_forward_and_reverse_derivatives_match_central_differences(offset
     v0 = jnp.array(velocity)
     p0 = jnp.array([C, C])
     h_q = min(1e-10, 1e-3 * float(np.hypot(*offset))) if offset != (0.0, 0.0) else 1e-15
+    fwd_all = _jacobians["forward"](p0, q0, v0)  # d/d(params, q, v)
+    rev_all = _jacobians["reverse"](p0, q0, v0)
     cases = [
-        (lambda q: _forces(p0, q, v0), q0, np.array([h_q, h_q, 1e-6])),
-        (lambda v: _forces(p0, q0, v), v0, np.array([1e-5, 1e-5, 1e-4])),
-        (lambda p: _forces(p, q0, v0), p0, 1e-9 * np.array([1.0, 1.0])),
+        (lambda q: _forces_jit(p0, q, v0), q0, np.array([h_q, h_q, 1e-6]), 1),
+        (lambda v: _forces_jit(p0, q0, v), v0, np.array([1e-5, 1e-5, 1e-4]), 2),
+        (lambda p: _forces_jit(p, q0, v0), p0, 1e-9 * np.array([1.0, 1.0]), 0),
     ]
-    for f, x, h in cases:
-        fwd = np.asarray(jax.jacfwd(f)(x))
-        rev = np.asarray(jax.jacrev(f)(x))
+    for f, x, h, arg in cases:
+        fwd = np.asarray(fwd_all[arg])
+        rev = np.asarray(rev_all[arg])
         fd = _central_jacobian(f, x, h)
         assert np.all(np.isfinite(fwd)) and np.all(np.isfinite(rev))
         np.testing.assert_allclose(rev, fwd, rtol=1e-10, atol=1e-12 * np.abs(fwd).max())
