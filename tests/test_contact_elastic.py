@@ -159,10 +159,15 @@ def test_rough_force_custom_derivative_matches_the_quadrature():
         return law.quadrature_force(delta) if quadrature else law.force(delta)
 
     params = jnp.array([K, SIGMA, 0.7])
+    # Each derivative compiled once for the four depths (op by op, the hessian of the
+    # quadrature compiled each operation on first use).
+    derivatives = [
+        jax.jit(fn(force, argnums=(0, 1)), static_argnums=2) for fn in (jax.grad, jax.hessian)
+    ]
     for delta in (-4.0 * SIGMA, -1.0 * SIGMA, 0.5 * SIGMA, 12.0 * SIGMA):
-        for fn in (jax.grad, jax.hessian):
-            got = fn(force, argnums=(0, 1))(params, delta, False)
-            want = fn(force, argnums=(0, 1))(params, delta, True)
+        for derivative in derivatives:
+            got = derivative(params, delta, False)
+            want = derivative(params, delta, True)
             for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want), strict=True):
                 np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12 * np.max(np.abs(b)))
 
