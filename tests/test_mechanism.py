@@ -127,7 +127,9 @@ def test_clearance_mechanism_converges_to_ideal_as_clearance_shrinks():
     scene = SliderCrank()
     deviations = []
     for c in [2e-4, 2e-5]:
-        p = scene.resolve_params({"clearance": c})
+        # An array, not a float: the clearance is then data of one compiled run, not a
+        # constant compiled into each.
+        p = scene.resolve_params({"clearance": jnp.asarray(c)})
         mech = scene.build(p)
         tr = simulate(mech, scene.initial_state(p, mech), period, ts=ts, **scene.default_control)
         assert tr.ok, tr.status()
