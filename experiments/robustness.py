@@ -791,18 +791,19 @@ def _centre_finding(diag, impact):
   eccentricity vector e (smooth through the centre; `jaxdeploy/mechanism/_step_eccentricity.py`),
   and `tests/test_robustness.py` checks v⁻ of such a step against the flight speed."""
     if d is None:
-        return f"""* **v⁻ through the bearing's centre** (E = 1 GPa row). {history} The row
-  agrees with the tighter run to {row.get("ref_difference_rel", np.nan):.1e} (outputs) and
+        return f"""* **v⁻ through the bearing's centre** (E = 1 GPa row).
+  {history} The row agrees with the tighter run to
+  {row.get("ref_difference_rel", np.nan):.1e} (outputs) and
   {row.get("ref_dissipated_difference_rel", np.nan):.1e} (dissipated energy)."""
     loose, tight = d["rows"][0], d["rows"][1]
     d_loose, v_loose = loose["dissipated_difference_rel"], loose["v_minus_difference_rel"]
     tight_worst = max(tight["dissipated_difference_rel"], tight["v_minus_difference_rel"])
     bumped = d["perturbed"]["dissipated_difference_rel"]
-    return f"""* **v⁻ through the bearing's centre** (E = 1 GPa row). {history} The row still
-  misses the tighter-run check (diagnosis above): at rtol {loose["rtol"]:g} with steps
-  ≤ {loose["dt_max"]:g} s its dissipated energy differs from the converged run's by
-  {d_loose:.1e} of the energy moved, and its v⁻ by up to {v_loose:.1e} v0; at rtol
-  {tight["rtol"]:g} both are within {tight_worst:.0e}, and a {PERTURBATION:g} change of v0
+    return f"""* **v⁻ through the bearing's centre** (E = 1 GPa row).
+  {history} The row still misses the tighter-run check (diagnosis above): at rtol
+  {loose["rtol"]:g} with steps ≤ {loose["dt_max"]:g} s its dissipated energy differs from the
+  converged run's by {d_loose:.1e} of the energy moved, and its v⁻ by up to {v_loose:.1e} v0; at
+  rtol {tight["rtol"]:g} both are within {tight_worst:.0e}, and a {PERTURBATION:g} change of v0
   moves them by {bumped:.0e}. Not diagnosed further."""
 
 
