@@ -1,5 +1,5 @@
 """The clearance joint's v⁻ memory: the step interpolant of the eccentricity e that locates
-onsets and peaks of δ = |e| − c (step independence through an impact is checked in
+onsets, peaks and separations of δ = |e| − c (step independence through an impact is checked in
 tests/test_diffrax_path.py, the whole run through the centre in tests/test_robustness.py).
 
 References are independent of the interpolant: exact polynomial paths e(t) (which the cubic
@@ -59,6 +59,20 @@ def _exact(x=X, y=Y):
         return (speed2 + curv - rate(t) ** 2) / norm(t)
 
     return delta, rate, acceleration
+
+
+def test_separation_is_the_first_downward_crossing_of_the_exact_path():
+    """A journal in contact (δ above the level) leaves it moving inwards and goes on through
+    the centre: `separation` finds where δ falls through the level (the end of the contact,
+    where v⁻ resets), at or just past it, to the exact path's root."""
+    x = np.array([2e8, 0.0, -0.9, 8e-6])  # in contact at t = 0 (δ = −2 µm), then inwards
+    y = np.array([0.0, 0.0, 0.0, 1e-7])
+    delta, rate, _ = _exact(x, y)
+    t_off = brentq(lambda t: delta(t) - LEVEL, 0.0, 5e-6, xtol=1e-22, rtol=1e-15)
+    assert delta(0.0) > LEVEL > delta(H) and rate(t_off) < 0.0  # the case is what it claims
+    s_off = float(_path(0.0, x, y).separation(LEVEL))
+    np.testing.assert_allclose(s_off * H, t_off, rtol=1e-10)
+    assert delta(s_off * H) <= LEVEL + 1e-15  # at or past the crossing: out of contact
 
 
 @pytest.mark.parametrize("t0", [0.0, 1e-7])

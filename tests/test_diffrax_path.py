@@ -143,10 +143,11 @@ def test_gradient_through_kvaerno_path_matches_finite_differences():
 
 def test_adaptive_steps_end_on_the_events_that_set_v_minus(slider_crank):
     """`simulate(..., locate_events=True)` (the default): a step inside which the contact
-    begins, or inside which δ̇ peaks above v⁻, is redone to end just past that event
-    (`jaxdeploy.solvers.LocateEvents`). Against the event-exact numpy model: a step ends
-    within 5 ns of both events (a contact lasts 53 µs; without location the peak fell 43 ns
-    from the nearest step end with Dopri8 at this tolerance), and v⁻ equals the peak speed."""
+    begins, inside which δ̇ peaks above v⁻, or inside which the contact ends (v⁻ resets), is
+    redone to end just past that event (`jaxdeploy.solvers.LocateEvents`). Against the
+    event-exact numpy model: a step ends within 5 ns of all three events of the first contact
+    (a contact lasts 53 µs; without location the peak fell 43 ns from the nearest step end
+    with Dopri8 at this tolerance), and v⁻ equals the peak speed."""
     params, mech, s0 = slider_crank
     ts = np.linspace(0.0, WINDOW, 36)
     tr = simulate(
@@ -154,10 +155,11 @@ def test_adaptive_steps_end_on_the_events_that_set_v_minus(slider_crank):
     )
     assert tr.ok, tr.status()
     peer = SliderCrankNumpy(params).solve(s0, WINDOW, ts, "DOP853", 1e-12, 1e-14)
-    (onset, _, _), (peak, _, peak_speed) = peer.events[:2]
+    (onset, _, _), (peak, _, peak_speed), (separation, kind, _) = peer.events[:3]
+    assert kind == "separation"
     ends = np.asarray(tr.step_times)
     ends = ends[np.isfinite(ends)]
-    for event in (onset, peak):
+    for event in (onset, peak, separation):
         assert np.min(np.abs(ends - event)) < 5e-9, (event, ends[np.abs(ends - event) < 1e-7])
     in_contact = np.asarray(tr.memory[4]["in_contact"]) > 0.5
     v_minus = np.asarray(tr.memory[4]["impact_velocity"])[in_contact][-1]

@@ -1,6 +1,6 @@
 """The eccentricity of a clearance joint over one accepted step, interpolated to locate the
-contact onset and the peak of the approach speed inside the step (`RevoluteClearance`'s v⁻
-memory).
+contact onset, the peak of the approach speed and the separation inside the step
+(`RevoluteClearance`'s v⁻ memory).
 
 Why e and not δ. The penetration δ = |e| − c has a kink at the bearing's centre, e = 0: a
 journal flying through the centre at speed v has δ̇ = −v before it and +v after it. A cubic
@@ -137,6 +137,28 @@ class StepEccentricity:
         slope = self._onset_slope(x)
         step = (self.penetration(x) - level) / jnp.where(slope > 0, slope, jnp.inf)
         return jnp.clip(x - step, 0.0, 1.0)
+
+    def separation(self, level):
+        """The first s ∈ [0, 1] where δ(s) falls through `level` (δ₀ > level ≥ δ₁: the
+        contact current at the step's start ended inside it), for event location only (no
+        derivative: nothing is computed from it but where the step should end)."""
+        frozen = self._frozen()
+        samples = jnp.linspace(0.0, 1.0, GRID + 1)
+        below = frozen.penetration(samples) <= level
+        k = jnp.argmax(below[1:])  # the first sample interval whose right end is below
+
+        def newton_or_bisect(_, bracket):
+            lo, hi, x = bracket
+            f = frozen.penetration(x) - level
+            slope = frozen._onset_slope(x)
+            lo, hi = jnp.where(f > 0, x, lo), jnp.where(f > 0, hi, x)
+            newton = x - f / jnp.where(slope < 0, slope, -jnp.inf)
+            ok = (slope < 0) & (newton > lo) & (newton < hi)
+            return lo, hi, jnp.where(ok, newton, 0.5 * (lo + hi))
+
+        lo, hi = samples[k], samples[k + 1]
+        _, hi, _ = jax.lax.fori_loop(0, NEWTON, newton_or_bisect, (lo, hi, 0.5 * (lo + hi)))
+        return hi  # at or just past the crossing: δ(hi) ≤ level
 
     def peak(self, s_start):
         """`(s, inside)`: the largest δ̇ over [s_start, 1], located on `GRID` + 1 samples and

@@ -67,9 +67,10 @@ step that crosses a Hertz onset δ(t) carries a (t − t_on)^3.5 term that no cu
 at an interior peak the force's dependence on max(v⁻, δ̇) has a kink: the interpolated v⁻
 errs by an amount the step length sets and no error estimate sees (measured on slider_crank:
 a tighter tolerance stopped improving the solution at ~1e-6 of c).
-So the memory also records `event_fraction`, where in the step the onset or a v⁻-raising peak
-fell, and adaptive runs redo such a step to end just past the event
-(`jaxdeploy.solvers.LocateEvents`): v⁻ is then taken where the interpolant is exact to round-off.
+So the memory also records `event_fraction`, where in the step the onset, a v⁻-raising peak
+or the separation (where v⁻ resets) fell, and adaptive runs redo such a step to end just past
+the event (`jaxdeploy.solvers.LocateEvents`): v⁻ is then taken where the interpolant is exact
+to round-off, and the reset happens where the contact ends.
 "In contact" means δ beyond the elastic law's onset (0 for Hertz, about (s0 − 3)σ for the rough
 law).
 """
@@ -232,7 +233,15 @@ class RevoluteClearance(AbstractElement):
             return running_max, event
 
         def out_of_contact_at_end():
-            return g.penetration_rate, jnp.ones_like(g.penetration)
+            # A contact that ended inside this step: v⁻ resets there, and with it the force
+            # (a rough law's force at its onset level is not zero), so the separation is an
+            # event too. Unlocated, the reset lands on whichever step end follows it, and
+            # runs at any tolerance differed by ~1e-6 c after the first separation
+            # (deploy_array, Dopri8 at rtol 1e-11…1e-13).
+            event = jax.lax.cond(
+                was_in, lambda: path.separation(onset), lambda: jnp.ones_like(g.penetration)
+            )
+            return g.penetration_rate, event
 
         # The interpolant's root and peak searches (µs per step) only where they matter.
         v_minus, event = jax.lax.cond(now_in, in_contact_at_end, out_of_contact_at_end)
@@ -247,9 +256,9 @@ class RevoluteClearance(AbstractElement):
         }
 
     def event_fraction(self, memory):
-        """Where in the last accepted step v⁻ was set — the contact's onset or an interior
-        peak of δ̇ that raised it — as a fraction of the step (≥ 1: neither happened);
-        `None` for laws without v⁻ memory."""
+        """Where in the last accepted step v⁻ was set or reset — the contact's onset, an
+        interior peak of δ̇ that raised it, or the separation — as a fraction of the step
+        (≥ 1: none happened); `None` for laws without v⁻ memory."""
         return memory["event_fraction"] if self.has_memory else None
 
     def side_forces(self, kin: Kinematics, memory):

@@ -85,8 +85,8 @@ class AbstractElement(eqx.Module):
 
     def event_fraction(self, memory) -> Array | None:
         """Where inside the last accepted step an event of this element's memory happened
-        (a clearance joint's onset or v⁻-raising peak), as the fraction s ∈ [0, 1) of the
-        step; ≥ 1 when none did. `None` (the default) for elements without locatable events.
+        (a clearance joint's onset, v⁻-raising peak or separation), as the fraction s ∈ [0, 1)
+        of the step; ≥ 1 when none did. `None` (the default) for elements without locatable events.
         Adaptive runs use it to end a step just past the event
         (`jaxdeploy.solvers.LocateEvents`)."""
         return None

@@ -1,6 +1,6 @@
 """Event location by step relocation: an adaptive step that a memory event (a clearance
-joint's contact onset, or a peak of its approach speed that raises v⁻) falls inside is redone
-so that it ends just past the event.
+joint's contact onset, a peak of its approach speed that raises v⁻, or its separation, where
+v⁻ resets) falls inside is redone so that it ends just past the event.
 
 Why. A clearance joint's damping needs v⁻, the approach speed at contact onset, which is memory
 taken after each accepted step from δ = |e| − c on the step's cubic Hermite interpolant of the
