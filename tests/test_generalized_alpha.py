@@ -178,6 +178,11 @@ def test_ideal_slider_crank_acceleration_extremes():
     np.testing.assert_allclose(acc.max(), a_ideal.max(), rtol=1e-3)
 
 
+# Slow: the default suite checks a superset in tests/test_gradients.py
+# (test_impact_forward_and_reverse_mode_match_central_differences: the same damped impact —
+# Lankarani–Nikravesh, 0.5 m/s, c = 20 µm —, fixed-step generalized-α, reverse mode against
+# central differences at 1e-4, w.r.t. c_e and K and also c and σ, forward mode too).
+@pytest.mark.slow
 def test_gradient_through_solver_matches_finite_differences():
     """d(position after a damped impact)/d(restitution, stiffness), reverse mode through the
     generalized-α steps (implicit-function-theorem Newton), against central differences."""
