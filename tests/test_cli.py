@@ -53,6 +53,9 @@ def test_compiled_simulation_is_kept_in_the_persistent_cache(tmp_path):
     cache = tmp_path / "xla"
     env = {k: v for k, v in os.environ.items() if k != "EQX_ON_ERROR"}
     env["JAXDEPLOY_CACHE_DIR"] = str(cache)
+    # JAX stores only programs that took ≥ 1 s to compile (its default); a busy machine made
+    # that true and a quiet one false, so the test would pass or fail with the load.
+    env["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
     cmd = [sys.executable, "-m", "jaxdeploy.cli", "simulate", "pendulum", "--t-end", "0.05"]
     proc = subprocess.run(
         [*cmd, "--out", str(tmp_path / "run"), "--quiet"], env=env, capture_output=True, text=True
