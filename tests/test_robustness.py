@@ -452,6 +452,24 @@ def test_energy_meter_does_not_change_the_dynamics():
     assert lost == pytest.approx(1.0 - rebound**2, abs=2e-3)
 
 
+def test_energy_meter_keeps_event_location():
+    """A metered clearance joint still reports its v⁻ events, so an adaptive metered run
+    locates them and steps exactly as the plain one (the meter used to hide them: metered
+    runs then took other steps than the runs they instrument)."""
+    scene = Impact(damping="flores")
+    params = scene.resolve_params()
+    plain = scene.build(params)
+    wrapped = metered(plain)
+    runs = [
+        simulate(m, scene.initial_state(params, m), 6e-4, rtol=1e-8, atol=1e-13, n_save=5)
+        for m in (plain, wrapped)
+    ]
+    assert all(run.ok for run in runs)
+    for key in ("num_accepted_steps", "num_rejected_steps"):
+        assert int(runs[0].stats[key]) == int(runs[1].stats[key]), key
+    np.testing.assert_allclose(np.asarray(runs[0].q), np.asarray(runs[1].q), rtol=1e-12, atol=0)
+
+
 def test_a_leftover_partial_write_is_not_a_result(tmp_path):
     """A killed writer leaves only its hidden temporary file: the folder holds no result, so
     it is not refused, and preparing it removes the leftover. A real file is still refused."""

@@ -82,6 +82,11 @@ class EnergyMeter(AbstractElement):
             return jnp.array(False)
         return self.inner.switched(before["inner"], after["inner"])
 
+    def event_fraction(self, memory):
+        # The meter must not change how a run steps: the inner element's events (a clearance
+        # joint's onset, v⁻ peak, separation) are still located.
+        return self.inner.event_fraction(memory["inner"]) if self.inner.has_memory else None
+
     def idealized(self):
         # A clearance joint idealizes to a revolute joint, which does no work: no meter.
         ideal = self.inner.idealized()
