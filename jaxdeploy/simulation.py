@@ -8,7 +8,7 @@ status that says when and why a run failed (never silent NaN).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import diffrax as dfx
 import equinox as eqx
@@ -326,6 +326,8 @@ def simulate(
     # The step is data, not part of the compiled program: changing it does not recompile.
     dt0 = jnp.asarray(dt, dtype=float)
     solver = GeneralizedAlpha() if solver is None else solver
+    if not control.adaptive and isinstance(solver, GeneralizedAlpha):
+        solver = replace(solver, estimate_error=False)
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
     y0 = MechanismState(initial.q, initial.v, initial.qdd, initial.lam, initial.memory)
     ts = _save_times(t0, t_end, n_save, ts)

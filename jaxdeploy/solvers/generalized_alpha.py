@@ -297,6 +297,8 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
       agree with it to round-off level (with 1e-4 the per-step differences, summed over
       3500 steps of h = 1e-7, cost the fixed-step convergence test through an impact its
       second order).
+    - `estimate_error`: compute the local error estimate (an index-1 acceleration solve per
+      step). `simulate` turns it off for fixed steps, where nothing reads it.
 
     The iteration matrix `[[M + (K + γ' C)/β' + (Φ_qᵀ μ)_q, Φ_qᵀ], [Φ_q, 0]]` is formed by
     `StepSystem.iteration_matrix`: compressed forward-mode derivatives of the constraint terms
@@ -317,6 +319,7 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
     refresh_rate: float = eqx.field(static=True, default=0.2)
     refresh_after: int = eqx.field(static=True, default=5)
     newton_safety: float = eqx.field(static=True, default=1e-6)
+    estimate_error: bool = eqx.field(static=True, default=True)
 
     term_structure: ClassVar = MechanismTerm
     interpolation_cls: ClassVar = dfx.ThirdOrderHermitePolynomialInterpolation
@@ -515,16 +518,19 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
         # at the new state, not from the step's q̈₁ = β' u: β' ~ 1/h², so Newton's and
         # round-off's error in u (ε|q| at best) becomes ~ε|q|/h² in q̈₁, which at small steps
         # swamps the velocity estimate and drives h to zero (measured on deploy_array).
-        accel1, _ = mech.accelerations(
-            *jax.lax.stop_gradient((q1, v1, t1, memory)),
-        )
-        accel0 = jnp.where(made_jump, qdd0, solver_state.accel_now)
         history = (~made_jump) & (solver_state.step_prev > 0.0)
-        err_q, err_v = jax.lax.stop_gradient(
-            local_error_estimate(
-                cf, h, solver_state.step_prev, solver_state.accel_prev, accel0, accel1, history
+        accel0 = jnp.where(made_jump, qdd0, solver_state.accel_now)
+        if self.estimate_error:
+            accel1, _ = mech.accelerations(*jax.lax.stop_gradient((q1, v1, t1, memory)))
+            err_q, err_v = jax.lax.stop_gradient(
+                local_error_estimate(
+                    cf, h, solver_state.step_prev, solver_state.accel_prev, accel0, accel1, history
+                )
             )
-        )
+        else:
+            # Fixed steps read no error: skip the index-1 solve (it is carried in the state,
+            # so the compiler could not drop it).
+            accel1, err_q, err_v = accel0, jnp.zeros_like(q1), jnp.zeros_like(v1)
         err_q = jnp.where(converged, err_q, jnp.inf)
         err_v = jnp.where(converged, err_v, jnp.inf)
         y_error = MechanismState(
