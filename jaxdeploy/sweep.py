@@ -64,10 +64,20 @@ def _definition(scene, grid, fixed, t_end, n_save, control, chunk_size, features
         "fixed": {k: float(v) for k, v in (fixed or {}).items()},
         "t_end": float(t_end),
         "n_save": int(n_save),
-        "control": {k: (None if v is None else float(v)) for k, v in control.items()},
+        "control": {k: _control_value(v) for k, v in control.items()},
         "chunk_size": int(chunk_size),
         "features": features,
     }
+
+
+def _control_value(value):
+    """A step-control entry as JSON: numbers as floats, a solver by its name or its repr (a
+    deterministic description, so that resuming with another solver is refused)."""
+    if value is None or isinstance(value, str):
+        return value
+    if isinstance(value, int | float):
+        return float(value)
+    return repr(value)
 
 
 def _read_manifest(path):

@@ -123,6 +123,16 @@ def test_objective_composition_and_parsing():
     assert float(objective(dep)) == pytest.approx(expected, rel=1e-12)
     assert set(objective.parts(dep)) == {"panel1:peak_vibration", "panel1:log_decay"}
     assert len(ob.parse_objective("paper").terms) == 4
+    # The reproducible reading: its parts are distinct, and its J is their log sum.
+    reproducible = ob.parse_objective("paper_reproducible")
+    both = {**dep.channels}
+    both.update({k.replace("panel1", "panel2"): v for k, v in dep.channels.items()})
+    both_panels = ob.Deployment(dep.ts, dep.lock_time, both, None)
+    parts = reproducible.parts(both_panels)
+    assert len(parts) == len(reproducible.terms) == 3
+    assert float(reproducible(both_panels)) == pytest.approx(
+        sum(math.log(float(v)) for v in parts.values()), rel=1e-12
+    )
     with pytest.raises(ValueError, match="unknown"):
         ob.parse_objective("panel1:loudness=1")
     with pytest.raises(ValueError, match="PANEL:FEATURE=WEIGHT"):

@@ -73,6 +73,17 @@ def test_grid_parsing_and_case_order():
         parse_grid(["a=1:2"])
 
 
+def test_sweep_definition_records_the_solver():
+    # A solver given by name (or as an object) is part of the definition, so resuming a sweep
+    # with another solver is refused; numbers stay numbers.
+    from jaxdeploy.solvers import GeneralizedAlpha
+    from jaxdeploy.sweep import _control_value
+
+    assert _control_value("tsit5") == "tsit5"
+    assert _control_value(1e-6) == 1e-6 and _control_value(None) is None
+    assert _control_value(GeneralizedAlpha(newton="full")) != _control_value(GeneralizedAlpha())
+
+
 def test_sweep_killed_and_resumed_on_four_devices(tmp_path):
     env = _env(tmp_path / "cache")
     full, killed = tmp_path / "full", tmp_path / "killed"
