@@ -29,6 +29,23 @@ def test_unknown_scene_and_parameter_are_refused(tmp_path, capsys):
     assert "unknown parameter 'lenght'" in err and "length" in err
 
 
+def test_solver_is_chosen_by_name_and_a_bad_name_is_refused(tmp_path, capsys):
+    out = tmp_path / "tsit5"
+    args = ["simulate", "pendulum", "--t-end", "0.1", "--out", str(out), "--quiet"]
+    assert main([*args, "--solver", "tsit5"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "ok" and summary["step_control"]["solver"] == "tsit5"
+    for command in (
+        ["simulate", "pendulum", "--out", str(tmp_path / "a")],
+        ["optimize", "--out", str(tmp_path / "b")],
+        ["sweep", "--grid", "panel1_ra=1e-6,2e-6", "--out", str(tmp_path / "c")],
+    ):
+        assert main([*command, "--solver", "rk4"]) == 2
+        err = capsys.readouterr().err
+        assert "--solver = 'rk4' is unknown" in err and "tsit5" in err
+        assert not any(tmp_path.glob(command[-1].rsplit("/", 1)[-1] + "/*"))
+
+
 def test_out_of_range_parameter_names_the_range(tmp_path, capsys):
     code = main(
         ["simulate", "slider_crank", "--set", "clearance=-1e-4", "--out", str(tmp_path / "c")]

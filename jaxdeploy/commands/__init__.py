@@ -22,3 +22,19 @@ def discover() -> list:
         if all(hasattr(module, a) for a in ("NAME", "HELP", "add_arguments", "run")):
             modules.append(module)
     return sorted(modules, key=lambda m: m.NAME)
+
+
+SOLVER_HELP = "solver by name (default: the scene's; e.g. generalized_alpha, tsit5, kvaerno5)"
+
+
+def solver_control(scene, name) -> dict:
+    """The scene's step control with `--solver NAME` applied; a bad name raises ValueError
+    naming the valid ones."""
+    from ..solvers import SOLVER_NAMES
+
+    control = dict(scene.default_control)
+    if name is not None:
+        if name not in SOLVER_NAMES:
+            raise ValueError(f"--solver = {name!r} is unknown; valid: {', '.join(SOLVER_NAMES)}")
+        control["solver"] = name
+    return control

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import sys
 
+from . import SOLVER_HELP, solver_control
+
 NAME = "optimize"
 HELP = "choose Ra, clearance (or any parameter) by gradients on a deployment objective"
 DEFAULT_PARAMS = ("panel1_ra", "panel2_ra", "panel1_clearance", "panel2_clearance")
@@ -53,6 +55,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", required=True, help="output folder")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing result")
+    parser.add_argument("--solver", default=None, metavar="NAME", help=SOLVER_HELP)
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
@@ -116,6 +119,7 @@ def run(args) -> int:
             if not lo < value < hi:  # the default outside the box: start at its log-centre
                 value = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
             x0[name] = value
+        control = solver_control(scene, args.solver)
         if args.steps < 1:
             raise ValueError(f"--steps = {args.steps}: must be ≥ 1")
         if not args.t_end > 0:
@@ -133,6 +137,7 @@ def run(args) -> int:
         args.t_end,
         n_save=args.n_save,
         fixed=fixed,
+        control=control,
         adjoint=dfx.ForwardMode() if pathwise else None,
     )
     smoothing = None

@@ -8,6 +8,8 @@ import os
 import sys
 import time
 
+from . import SOLVER_HELP, solver_control
+
 NAME = "simulate"
 HELP = "run a scene and write trajectory, plots, summary"
 DEFAULT_SCENE = "deploy_array"
@@ -20,6 +22,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--out", default=None, help="output folder (default results/SCENE)")
     parser.add_argument("--n-save", type=int, default=2001, help="number of saved states")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing result")
+    parser.add_argument("--solver", default=None, metavar="NAME", help=SOLVER_HELP)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -70,6 +73,10 @@ def run(args) -> int:
         return _refuse(f"--t-end = {t_end} is invalid: it must be finite and in (0, inf) s")
     if args.n_save < 2:
         return _refuse(f"--n-save = {args.n_save} is invalid: it must be an integer >= 2")
+    try:
+        control = solver_control(scene, args.solver)
+    except ValueError as err:
+        return _refuse(str(err))
     out = args.out or f"results/{scene_name}"
     try:
         check_output_dir(out, args.overwrite)
@@ -87,7 +94,6 @@ def run(args) -> int:
     if os.path.exists(stale_marker):
         os.unlink(stale_marker)
 
-    control = dict(scene.default_control)
     start = time.perf_counter()
     trajectory = simulate(
         mechanism,

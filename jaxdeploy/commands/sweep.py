@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import sys
 
+from . import SOLVER_HELP, solver_control
+
 NAME = "sweep"
 HELP = "parameter sweep: vmapped, sharded, chunked, resumable"
 
@@ -33,6 +35,7 @@ def add_arguments(parser) -> None:
         help="design objective terms or a preset, stored per case (deploy_array)",
     )
     parser.add_argument("--no-trajectories", action="store_true", help="store no q, v")
+    parser.add_argument("--solver", default=None, metavar="NAME", help=SOLVER_HELP)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument(
         "--distributed", action="store_true", help="call jax.distributed.initialize() first"
@@ -97,12 +100,15 @@ def run(args) -> int:
     t_end = scene.default_t_end if args.t_end is None else args.t_end
     evaluate, features = None, None
     try:
+        control = solver_control(scene, args.solver)
         if args.objective:
             from ..objectives import parse_objective
             from ..optimize import DesignProblem
 
             objective = parse_objective(args.objective)
-            problem = DesignProblem(scene, objective, t_end, n_save=args.n_save, fixed=fixed)
+            problem = DesignProblem(
+                scene, objective, t_end, n_save=args.n_save, fixed=fixed, control=control
+            )
 
             def evaluate(params, trajectory):
                 dep, _ = problem.deployment({k: params[k] for k in grid}, trajectory)
@@ -116,6 +122,7 @@ def run(args) -> int:
             t_end=t_end,
             n_save=args.n_save,
             fixed=fixed,
+            control=control,
             chunk_size=args.chunk_size,
             resume=args.resume,
             evaluate=evaluate,
