@@ -166,33 +166,38 @@ def _case_parts(scene_name, ideal, dt, repeats, calls, batch=None) -> dict:
         return system(mech).iteration_matrix(x)
 
     x0 = jnp.concatenate([jnp.zeros_like(s0.q), s0.lam / beta_p])
-    factors = _factor(matrix(mech, x0))
     pieces = {
-        "residual r(z)": residual,
-        "forces and contact Q": lambda mech, x: mech.generalized_forces(
+        "residual r(z)": lambda mech, factors, x: residual(mech, x),
+        "forces and contact Q": lambda mech, factors, x: mech.generalized_forces(
             s0.q + x[:n], s0.v, 0.0, memory
         ),
-        "iteration matrix": matrix,
-        "factorisation": lambda mech, x: _factor(matrix(mech, x))[0],
-        "solve with factors": lambda mech, x: _apply_factor(*factors, x),
+        "iteration matrix": lambda mech, factors, x: matrix(mech, x),
+        "factorisation": lambda mech, factors, x: _factor(matrix(mech, x))[0],
+        "solve with factors": lambda mech, factors, x: _apply_factor(*factors, x),
     }
     size = 1 if batch is None else batch
     z0 = x0 if batch is None else jnp.tile(x0, (batch, 1))
+    # The factors are an argument, one set per case in a group, as in a run (where they are
+    # carried in each case's solver state). Closed over as constants, XLA compiled the
+    # batched solve of a group of 32 into a path ~300x slower per case than a run's.
+    factors = _factor(matrix(mech, x0))
+    if batch is not None:
+        factors = jax.tree.map(lambda f: jnp.tile(f, (batch,) + (1,) * f.ndim), factors)
     out = {}
     for name, fn in pieces.items():
-        each = fn if batch is None else jax.vmap(fn, in_axes=(None, 0))
+        each = fn if batch is None else jax.vmap(fn, in_axes=(None, 0, 0))
 
         @jax.jit
-        def loop(mech, z, each=each):
+        def loop(mech, factors, z, each=each):
             def body(c, _):
                 # A nonlinear use of every output entry: with a plain sum XLA folds linear
                 # work (e.g. forward derivatives along constant directions) into the sum.
-                r = each(mech, c)
+                r = each(mech, factors, c)
                 return c + 1e-30 * jnp.sum(r * r), None
 
             return jax.lax.scan(body, z, None, length=calls)[0]
 
-        _, cpu = _cpu(lambda loop=loop: jax.block_until_ready(loop(mech, z0)), repeats)
+        _, cpu = _cpu(lambda loop=loop: jax.block_until_ready(loop(mech, factors, z0)), repeats)
         out[name] = cpu / calls / size * 1e6
     # The factorisation row above includes forming the matrix: report it alone.
     out["factorisation"] -= out["iteration matrix"]
