@@ -285,7 +285,7 @@ def main(argv=None):
 
         size = sizes[0] if sizes else args.batch
         dt = 1e-4 if args.scene == "deploy_array" else 1e-6
-        result["parts"] = {"dt": dt, "group": size}
+        result["parts"] = {"dt": dt, "group_size": size}
         for key, group in (("alone", None), ("group", size)):
             if any(s.startswith("generalized_alpha") for s in args.solver):
                 result["parts"][key] = _case_parts(args.scene, False, dt, 3, 500, group)
@@ -453,7 +453,7 @@ def _verdict(solver, runs) -> str:
 
 
 def _parts_table(parts) -> str:
-    g = parts["group"]
+    g = parts["group_size"]
     rows = []
     for kind, names in (
         ("", ("residual r(z)", "iteration matrix", "factorisation", "solve with factors")),
@@ -526,29 +526,41 @@ def _solver_comparison(r) -> str:
 
 
 def _parts_reading(parts) -> str:
-    """What the parts table says about the Newton variants and the ODE path (from its ratios)."""
+    """What the parts table says, from its ratios (alone over per case in a group)."""
     if not parts:
         return ""
-    text = []
+    ratios = {}
+    for kind in ("", "ode_"):
+        alone, group = parts.get(f"{kind}alone"), parts.get(f"{kind}group")
+        if alone is not None:
+            ratios.update({(kind, k): alone[k] / group[k] for k in alone if k != "size"})
+    text = [
+        f"Each part of a step (table below) costs {min(ratios.values()):.1f}–"
+        f"{max(ratios.values()):.1f}× less per case in a vmapped group of "
+        f"{parts['group_size']} than alone (compare the per-step "
+        "gains in the tables above)."
+    ]
     if "alone" in parts:
-        ratio = {k: parts["alone"][k] / parts["group"][k] for k in parts["alone"] if k != "size"}
-        cheap = ratio["residual r(z)"], ratio["solve with factors"]
-        dear = ratio["iteration matrix"], ratio["factorisation"]
+        cheap = ratios[("", "residual r(z)")], ratios[("", "solve with factors")]
+        dear = ratios[("", "iteration matrix")], ratios[("", "factorisation")]
         text.append(
             "Modified Newton's iterations are mostly a residual and a solve with stored "
-            f"factors, whose batch ratios here are {cheap[0]:.2f} and {cheap[1]:.2f}; Newton "
-            "proper also forms and factorises the matrix at every iteration, ratios "
-            f"{dear[0]:.2f} and {dear[1]:.2f}."
+            f"factors (ratios {cheap[0]:.2f} and {cheap[1]:.2f}); Newton proper also forms "
+            f"and factorises the matrix at every iteration ({dear[0]:.2f} and {dear[1]:.2f})."
         )
     if "ode_alone" in parts:
-        ratio = {k: parts["ode_alone"][k] / parts["ode_group"][k] for k in parts["ode_alone"]}
         text.append(
             "A Tsit5 step is six evaluations of the index-1 accelerations (each a constrained "
-            "linear solve; batch ratio "
-            f"{ratio['accelerations q̈(q, q̇)']:.2f}) and one projection onto the constraints "
-            f"({ratio['projection']:.2f})."
+            f"linear solve; {ratios[('ode_', 'accelerations q̈(q, q̇)')]:.2f}) and one "
+            f"projection onto the constraints ({ratios[('ode_', 'projection')]:.2f})."
         )
     return " ".join(text)
+
+
+def _density(r) -> str:
+    solver = DEFAULT_SOLVER if DEFAULT_SOLVER in r["runs"] else next(iter(r["runs"]))
+    steps = r["runs"][solver]["alone"]["steps_mean"]
+    return f"{steps / (r['t_end'] * 1e3):.0f} accepted steps per simulated ms with {solver} here"
 
 
 def _revision(versions) -> str:
@@ -597,8 +609,8 @@ control ({", ".join(f"{k} {val:g}" for k, val in r["control"].items())}), {r["ba
 varying {", ".join(r["varied"])} by a log-normal spread s = {r["spread"]} around the defaults
 (seed {r["seed"]}). This window is the start of the deployment (which locks at ≈ 0.54 s):
 the panels leave rest half deployed with the journals centred in their bearings, so it holds
-the pins' first flights across the clearance and their first impacts, the most densely
-stepped part of a run (docs/default_run.md for the whole 2 s run). A horizon this short
+the pins' first flights across the clearance and their first impacts ({_density(r)};
+docs/default_run.md gives the whole 2 s run's steps). A horizon this short
 keeps the regeneration within ~40 min; the mechanisms of the cost below (idle cases, per-step
 amortisation) do not depend on it, but the idle factor depends on how much the cases' step
 counts differ, which a longer window may change. Every program is compiled ahead of time
@@ -627,9 +639,9 @@ one knows before running them, so it is the bound on what any ordering can gain.
 **Idle: a batch runs until its slowest case.** A vmapped adaptive run is one `while` loop;
 each iteration costs every case of the batch, and the loop runs until the case with the most
 steps finishes. Here the cases' step counts differ widely although their parameters differ by
-only ~{r["spread"]:.0%}: the number and timing of impacts in the window changes from case to
-case. How well the parameters predict a case's step count (rank correlations below) says
-whether sorting the cases by a parameter could group like cases together:
+only ~{r["spread"]:.0%}. How well the parameters predict a case's step count (rank
+correlations below) says whether sorting the cases by a parameter could group like cases
+together:
 
 {_why(r)}
 
@@ -639,11 +651,11 @@ groups of nearly equal cases, which shows how much of the loss is idle steps.
 **Per-step gain: what a batch amortises is per-operation overhead, not arithmetic.** On
 XLA's CPU backend a step of one case is many small operations{size_text}; a batch turns each
 into one operation over the batch, saving the dispatch and loop overhead of all but one, but
-the arithmetic per case stays, and some batched operations are slower per case than the
-single ones (the ratios below 1 in the parts table). Inside a generalized-α step, the Newton
-`while` loop runs until the last case of the batch has converged, and with modified Newton
-the iteration matrix is formed for every case whenever any case asks for one
-(`jaxdeploy.solvers.generalized_alpha._run_if`). {_parts_reading(parts)}
+not the arithmetic per case. {_parts_reading(parts)} Inside a generalized-α step the Newton
+`while` loop also runs until the last case of the batch has converged, and with modified
+Newton the iteration matrix is formed for every case whenever any case asks for one
+(`jaxdeploy.solvers.generalized_alpha._run_if`): work a case alone would not do, which the
+per-step gain includes.
 
 {parts_text}"""
 
