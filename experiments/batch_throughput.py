@@ -3,7 +3,7 @@ simulations run one at a time with the same solver, measured side by side in one
 (compilation timed separately, ahead of time).
 
     PYTHONPATH=. python experiments/batch_throughput.py [--scene deploy_array] [--batch 256]
-        [--t-end 0.01] [--repeats 3] [--solver generalized_alpha tsit5 ...]
+        [--t-end 0.01] [--repeats 1] [--solver generalized_alpha tsit5 ...]
         [--groups all,32] [--sorted] [--out docs/batch_throughput.json] [--doc PAGE]
 
 The B cases scatter the varied parameters around the scene's defaults (deploy_array: panel1_ra,
