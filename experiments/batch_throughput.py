@@ -123,6 +123,27 @@ def _label(policy) -> str:
     return name + (", sorted" if kind == "sorted" else "")
 
 
+def pin_cores(count: int) -> list[int]:
+    """Pin every thread of this process to the first `count` of its allowed cores (0: leave
+    as is); the cores it runs on.
+
+    XLA's CPU client runs independent operations of one program on several threads. Unpinned
+    on this shared 2-core machine, a simulation alone used both cores when the other users
+    left one idle and one when they did not, and a batch differently again, so the wall-time
+    ratio followed the machine's load rather than the batch. Pinned, wall and CPU time are
+    both the cost on `count` cores.
+    """
+    allowed = sorted(os.sched_getaffinity(0))
+    if count < 0 or count > len(allowed):
+        raise SystemExit(f"--cores {count} is invalid: give 0 (no pinning) to {len(allowed)}")
+    if count == 0:
+        return allowed
+    chosen = set(allowed[:count])
+    for task in os.listdir("/proc/self/task"):  # threads already started (e.g. by imports)
+        os.sched_setaffinity(int(task), chosen)
+    return sorted(chosen)
+
+
 def time_alone(program, singles):
     """Every case alone, one after another: `(wall s, CPU s, trajectories)` for all."""
     start, start_cpu = time.perf_counter(), time.process_time()
@@ -167,6 +188,12 @@ def main(argv=None):
         help="also run the integer groups over the cases sorted by their steps alone",
     )
     ap.add_argument("--no-parts", action="store_true", help="skip the Newton-iteration parts")
+    ap.add_argument(
+        "--cores",
+        type=int,
+        default=1,
+        help="pin the process to this many cores (0: no pinning); see pin_cores",
+    )
     ap.add_argument("--out", default=None, help="write the result as JSON here")
     ap.add_argument("--doc", default=None, help="write a generated markdown page here")
     ap.add_argument(
@@ -182,6 +209,7 @@ def main(argv=None):
         return stored
     if args.batch < 1:
         raise SystemExit(f"--batch {args.batch} is invalid: it must be ≥ 1")
+    cores = pin_cores(args.cores)
     groups = parse_groups(args.groups)
     scene = get_scene(args.scene)
     table, varied, shared = _stack_cases(
@@ -203,6 +231,7 @@ def main(argv=None):
         "solvers": list(args.solver),
         "groups": groups,
         "control": step_control(scene),
+        "cores": cores,
         "versions": run_metadata(),
         "jaxdeploy_version": jaxdeploy.__version__,
         "argv": argv,
@@ -563,6 +592,18 @@ def _density(r) -> str:
     return f"{steps / (r['t_end'] * 1e3):.0f} accepted steps per simulated ms with {solver} here"
 
 
+def _cores_text(r) -> str:
+    cores = r.get("cores")
+    if not cores:
+        return ""
+    return (
+        f"The process ran on {len(cores)} core(s) (`--cores`, `pin_cores`): unpinned, XLA "
+        "lets a simulation alone use a second core whenever other users leave one idle, so "
+        "the wall-time ratio followed the machine's load; pinned, a ratio is the cost on the "
+        "same cores, and for throughput one runs one such process per core."
+    )
+
+
 def _revision(versions) -> str:
     git = versions.get("git") or {}
     if not isinstance(git, dict) or "commit" not in git:
@@ -598,7 +639,7 @@ times in one compiled loop, state of the first step, h = {parts["dt"]:g} s for g
 *Written by `{command.strip()}`; rerun it to regenerate. Machine: {v["platform"]},
 {len(v["devices"])} device(s), jax {v["jax"]}, code {_revision(v)}; shared by several
 users, so only the ratios of timings taken side by side (interleaved) in one run are
-meaningful.*
+meaningful. {_cores_text(r)}*
 {incomplete}
 Issue 7's target: a vmapped batch of {r["batch"]} at least 2× cheaper per simulation than one
 simulation, on this CPU. The honest comparison is against **the same solver run alone**: a
