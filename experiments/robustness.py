@@ -42,7 +42,7 @@ import numpy as np
 
 from jaxdeploy import contact
 from jaxdeploy.io import atomic_write_bytes, atomic_write_json, run_metadata
-from jaxdeploy.mechanism import add_clock, energy_balance, metered, step_log
+from jaxdeploy.mechanism import add_clock, energy_balance, energy_moved, metered, step_log
 from jaxdeploy.scenes import DeployArray, Impact
 from jaxdeploy.simulation import simulate
 
@@ -185,10 +185,7 @@ def run_case(scene, params, t_end, control, outputs, n_save, gradient=True, diff
     record.update(step_log(mech, traj.memory))
     if finite:
         balance = energy_balance(mech, traj.q, traj.v, traj.memory)
-        moved = float(
-            np.max(np.asarray(balance["kinetic"]) + np.asarray(balance["dissipated"]))
-            + np.max(np.abs(np.asarray(balance["injected"])))
-        )
+        moved = energy_moved(balance)
         record["energy_moved_J"] = moved
         record["energy_residual_J"] = float(np.max(np.abs(np.asarray(balance["residual"]))))
         record["energy_residual_rel"] = record["energy_residual_J"] / moved
@@ -221,10 +218,7 @@ def run_case(scene, params, t_end, control, outputs, n_save, gradient=True, diff
         moved_short = None
         if short.ok and np.all(np.isfinite(np.asarray(short.q))):
             bal = energy_balance(mech, short.q, short.v, short.memory)
-            moved_short = float(
-                np.max(np.asarray(bal["kinetic"]) + np.asarray(bal["dissipated"]))
-                + np.max(np.abs(np.asarray(bal["injected"])))
-            )
+            moved_short = energy_moved(bal)
             d_short = float(bal["dissipated"][-1])
     else:
         short, moved_short = traj, record.get("energy_moved_J")
@@ -421,10 +415,7 @@ def diagnose_deploy_energy(case):
         )
         if traj.ok:
             balance = energy_balance(mech, traj.q, traj.v, traj.memory)
-            moved = float(
-                np.max(np.asarray(balance["kinetic"]) + np.asarray(balance["dissipated"]))
-                + np.max(np.abs(np.asarray(balance["injected"])))
-            )
+            moved = energy_moved(balance)
             row["energy_residual_rel"] = (
                 float(np.max(np.abs(np.asarray(balance["residual"])))) / moved
             )

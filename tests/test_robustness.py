@@ -206,10 +206,22 @@ from jaxdeploy.mechanism import (  # noqa: E402
     add_clock,
     consistent_state,
     energy_balance,
+    energy_moved,
     metered,
 )
 from jaxdeploy.scenes import Impact  # noqa: E402
 from jaxdeploy.simulation import simulate  # noqa: E402
+
+
+def test_energy_moved_is_the_largest_energy_in_motion_plus_the_largest_injection():
+    # T + D peaks at 3 + 1 = 4 (not at the end); |J| peaks at 0.5 (a negative injection).
+    balance = {
+        "kinetic": np.array([0.0, 3.0, 1.0]),
+        "dissipated": np.array([0.0, 1.0, 2.0]),
+        "injected": np.array([0.0, -0.5, 0.2]),
+    }
+    assert energy_moved(balance) == 4.5
+
 
 # (clearance m, σ m, E Pa, c_e, v0 m/s): the corners of issue 8's matrix that one impact reaches.
 EXTREME_IMPACTS = [

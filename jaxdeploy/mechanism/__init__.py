@@ -14,7 +14,15 @@ from .forces import (
     Spring,
 )
 from .joints import AngleDriver, Prismatic, Revolute, Weld
-from .meters import EnergyMeter, StepClock, add_clock, energy_balance, metered, step_log
+from .meters import (
+    EnergyMeter,
+    StepClock,
+    add_clock,
+    energy_balance,
+    energy_moved,
+    metered,
+    step_log,
+)
 from .system import Mechanism
 
 __all__ = [
@@ -43,6 +51,7 @@ __all__ = [
     "add_clock",
     "consistent_state",
     "energy_balance",
+    "energy_moved",
     "metered",
     "step_log",
 ]

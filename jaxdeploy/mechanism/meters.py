@@ -39,6 +39,7 @@ from typing import ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .assembly import ConsistentState
 from .bodies import Body, Kinematics
@@ -243,3 +244,11 @@ def energy_balance(mechanism: Mechanism, q, v, memory) -> dict:
         residual=total - total[0] - (injected - injected[0]),
     )
     return out
+
+
+def energy_moved(balance: dict) -> float:
+    """The scale an energy residual is judged against: max_t (T + D) + max_t |J| over the run,
+    from an `energy_balance` — the most energy that was ever in motion, dissipated or put in
+    (a residual relative to E0 alone would be meaningless for a mechanism released from rest)."""
+    kinetic, dissipated = np.asarray(balance["kinetic"]), np.asarray(balance["dissipated"])
+    return float(np.max(kinetic + dissipated) + np.max(np.abs(np.asarray(balance["injected"]))))
