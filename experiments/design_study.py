@@ -159,19 +159,22 @@ def phase_reproducibility():
 
 
 def phase_grid():
-    problems = {k: problem(k) for k in OBJECTIVES}
+    # One problem (one ideal-joint reference run) and one deployment per case serve both
+    # objectives: they differ only in the features they read.
+    prob = problem()
+    objectives = {k: parse_objective(v) for k, v in OBJECTIVES.items()}
 
     def evaluate(params, trajectory):
+        dep, _ = prob.deployment({k: params[k] for k in NAMES}, trajectory)
         out = {}
-        for key, prob in problems.items():
-            dep, _ = prob.deployment({k: params[k] for k in NAMES}, trajectory)
-            out[f"objective_{key}"] = prob.objective(dep)
-            out.update(prob.objective.parts(dep))
+        for key, objective in objectives.items():
+            out[f"objective_{key}"] = objective(dep)
+            out.update(objective.parts(dep))
         return out
 
     out = _path("grid")
     sweep(
-        problems["paper"].scene,
+        prob.scene,
         {n: GRID_RA.tolist() for n in NAMES},
         out,
         t_end=T_END,
@@ -275,13 +278,18 @@ def phase_robust():
     atomic_write_json(_path("robust_compare.json"), {"rows": rows, "pairs": COMPARE_PAIRS})
 
 
-def _smoothed(J, s):
-    """The grid smoothed like a Stein run's objective: Gaussian weights in ln Ra with width s,
-    normalised over the grid points (a discrete stand-in for E[J(y + s ξ)], truncated at the
-    bounds)."""
+def _smoothing_weights(s):
+    """Gaussian weights in ln Ra with width s between grid points, each row normalised over
+    the grid (so the smoothing is truncated at the bounds)."""
     y = np.log(GRID_RA)
     w = np.exp(-0.5 * ((y[:, None] - y[None, :]) / s) ** 2)
-    w /= w.sum(axis=1, keepdims=True)
+    return w / w.sum(axis=1, keepdims=True)
+
+
+def _smoothed(J, s):
+    """The grid smoothed like a Stein run's objective (a discrete stand-in for
+    E[J(y + s ξ)])."""
+    w = _smoothing_weights(s)
     return w @ J @ w.T
 
 
@@ -290,9 +298,7 @@ def _near_optimal(J, s):
     2 sqrt(sd² + sd_min²), sd the standard error of J_s at a point if J were a smooth trend
     plus independent scatter of the size of its roughness (rms of J − J_s) — the smoothed
     grid's own resolution. Returns a boolean (n, n) array."""
-    y = np.log(GRID_RA)
-    w = np.exp(-0.5 * ((y[:, None] - y[None, :]) / s) ** 2)
-    w /= w.sum(axis=1, keepdims=True)
+    w = _smoothing_weights(s)
     smooth = w @ J @ w.T
     rough = np.sqrt(np.mean((J - smooth) ** 2))
     w2 = (w**2).sum(axis=1)
