@@ -134,3 +134,16 @@ def test_iteration_matrix_equals_dense_jacobian_of_the_residual(name):
             largest_contact = max(largest_contact, abs(float(normal)))
     if clearance:
         assert largest_contact > 1.0  # [N]: the contact law's derivative was exercised
+
+
+@pytest.mark.parametrize("name", list(_cases()))
+def test_constraint_jacobian_equals_dense_jacobian(name):
+    """`Mechanism.constraint_jacobian` (compressed along `constraint_pattern`) equals dense
+    forward-mode differentiation of Φ, away from the assembled pose too."""
+    mech, state = _cases()[name]
+    if not mech.n_constraints:
+        pytest.skip("no constraints")
+    rng = np.random.default_rng(2)
+    q = state.q + 0.1 * jnp.asarray(rng.standard_normal(state.q.shape))
+    dense = jax.jacfwd(mech.constraints)(q, 0.3)
+    np.testing.assert_allclose(mech.constraint_jacobian(q, 0.3), dense, rtol=1e-13, atol=1e-15)

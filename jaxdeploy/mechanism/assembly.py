@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._validation import is_concrete
+from .saddle_point import least_change_correction
 from .system import Mechanism
 
 
@@ -115,9 +116,8 @@ def project_velocities(mechanism: Mechanism, q, v_guess, t=0.0, fixed: Sequence[
         rhs = jnp.concatenate([rhs, v_guess[idx]])
     if jac.shape[0] == 0:
         return v_guess
-    minv = 1.0 / mechanism.mass_diagonal()
-    schur = (jac * minv) @ jac.T
-    return v_guess - minv * (jac.T @ jnp.linalg.solve(schur, jac @ v_guess - rhs))
+    mass_inverse = 1.0 / mechanism.mass_diagonal()
+    return v_guess - least_change_correction(mass_inverse, jac, jac @ v_guess - rhs)
 
 
 def _worst_element(mechanism: Mechanism, q, t) -> str:

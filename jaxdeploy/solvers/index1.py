@@ -39,6 +39,7 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from ..mechanism import Mechanism
+from ..mechanism.saddle_point import least_change_correction
 from .term import MechanismState, MechanismTerm
 
 
@@ -49,43 +50,29 @@ def _mechanism_of(terms) -> Mechanism:
     return terms.mechanism
 
 
-def stabilised_accelerations(mechanism: Mechanism, q, v, t, memory, baumgarte=0.0):
+def stabilised_accelerations(
+    mechanism: Mechanism, q, v, t, memory, baumgarte=0.0, linear_solve="range_space"
+):
     """`(q̈, λ)` of the index-1 system with Baumgarte stabilisation (rate `baumgarte` = ω_b,
-    rad/s; critically damped, α = ω_b, β = ω_b in Baumgarte's notation)."""
-    if mechanism.n_constraints == 0 or baumgarte == 0.0:
-        return mechanism.accelerations(q, v, t, memory)
-    mass = mechanism.mass_diagonal()
-    forces = mechanism.generalized_forces(q, v, t, memory)
-    jac = mechanism.constraint_jacobian(q, t)
-    phi = mechanism.constraints(q, t)
-    phi_dot = jac @ v - mechanism.constraint_velocity_rhs(q, t)
-    gamma = mechanism.constraint_acceleration_rhs(q, v, t)
-    rhs = gamma - 2.0 * baumgarte * phi_dot - baumgarte**2 * phi
-    n, m = q.shape[0], phi.shape[0]
-    kkt = jnp.block([[jnp.diag(mass), jac.T], [jac, jnp.zeros((m, m), dtype=q.dtype)]])
-    sol = jnp.linalg.solve(kkt, jnp.concatenate([forces, rhs]))
-    return sol[:n], sol[n:]
+    rad/s; critically damped, α = ω_b, β = ω_b in Baumgarte's notation);
+    `Mechanism.accelerations`."""
+    return mechanism.accelerations(q, v, t, memory, baumgarte, linear_solve)
 
 
 def project_onto_constraints(mechanism: Mechanism, q, v, t, iterations: int = 2):
     """Mass-weighted projection of `(q, q̇)` onto `Φ = 0`, `Φ_q q̇ + Φ_t = 0` (see module
-    docstring). `iterations` Gauss–Newton steps for positions (quadratic convergence: two
-    take an O(tol) drift to roundoff), one linear projection for velocities. Differentiable
-    (plain unrolled linear algebra)."""
+    docstring; `saddle_point.least_change_correction`). `iterations` Gauss–Newton steps for
+    positions (quadratic convergence: two take an O(tol) drift to roundoff), one linear
+    projection for velocities. Differentiable (plain unrolled linear algebra)."""
     if mechanism.n_constraints == 0:
         return q, v
-    minv = 1.0 / mechanism.mass_diagonal()
-
-    def correction(jac, residual):
-        schur = (jac * minv) @ jac.T
-        return minv * (jac.T @ jnp.linalg.solve(schur, residual))
-
+    mass_inverse = 1.0 / mechanism.mass_diagonal()
     for _ in range(iterations):
         jac = mechanism.constraint_jacobian(q, t)
-        q = q - correction(jac, mechanism.constraints(q, t))
+        q = q - least_change_correction(mass_inverse, jac, mechanism.constraints(q, t))
     jac = mechanism.constraint_jacobian(q, t)
-    v = v - correction(jac, jac @ v - mechanism.constraint_velocity_rhs(q, t))
-    return q, v
+    residual = jac @ v - mechanism.constraint_velocity_rhs(q, t)
+    return q, v - least_change_correction(mass_inverse, jac, residual)
 
 
 class Index1Field(eqx.Module):
@@ -94,10 +81,13 @@ class Index1Field(eqx.Module):
 
     mechanism: Mechanism
     baumgarte: float = eqx.field(static=True, default=0.0)
+    linear_solve: str = eqx.field(static=True, default="range_space")
 
     def __call__(self, t, y, memory):
         q, v = y
-        qdd, _ = stabilised_accelerations(self.mechanism, q, v, t, memory, self.baumgarte)
+        qdd, _ = stabilised_accelerations(
+            self.mechanism, q, v, t, memory, self.baumgarte, self.linear_solve
+        )
         return v, qdd
 
 
@@ -176,8 +166,18 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
     def interpolation_cls(self):
         return functools.partial(MechanismInterpolation, inner_cls=self.solver.interpolation_cls)
 
+    @property
+    def linear_solve(self) -> str:
+        """How q̈ is solved for (`jaxdeploy.mechanism.saddle_point`): the cheaper range-space
+        method for explicit solvers; for implicit ones the LU of the whole system, whose
+        exact zeros their stage iteration needs to converge at tight `atol`."""
+        if isinstance(self.solver, dfx.AbstractImplicitSolver):
+            return "kkt_lu"
+        return "range_space"
+
     def _inner_term(self, terms):
-        return dfx.ODETerm(Index1Field(_mechanism_of(terms), self.baumgarte))
+        field = Index1Field(_mechanism_of(terms), self.baumgarte, self.linear_solve)
+        return dfx.ODETerm(field)
 
     def order(self, terms):
         return self.solver.order(self._inner_term(terms))
@@ -205,7 +205,9 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
         q1, v1 = q1_inner, v1_inner
         if self.project:
             q1, v1 = project_onto_constraints(mech, q1, v1, t1)
-        qdd1, lam1 = stabilised_accelerations(mech, q1, v1, t1, memory, self.baumgarte)
+        qdd1, lam1 = stabilised_accelerations(
+            mech, q1, v1, t1, memory, self.baumgarte, self.linear_solve
+        )
         memory1 = mech.memory_after_step(memory, q1, v1, h)
         y1 = MechanismState(q1, v1, qdd1, lam1, memory1)
 
