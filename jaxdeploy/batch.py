@@ -49,15 +49,9 @@ def run_scene(
     t_end = scene.default_t_end if t_end is None else t_end
     mechanism = scene.build(params)
     initial = scene.initial_state(params, mechanism)
-    return simulate(
-        mechanism,
-        initial,
-        t_end,
-        ts=ts,
-        n_save=n_save,
-        **step_control(scene, control),
-        **simulate_options,
-    )
+    # An explicit option (e.g. `solver=`) overrides the scene's default step control.
+    options = {**step_control(scene, control), **simulate_options}
+    return simulate(mechanism, initial, t_end, ts=ts, n_save=n_save, **options)
 
 
 @dataclass(frozen=True)
