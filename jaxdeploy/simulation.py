@@ -22,6 +22,7 @@ from .mechanism import ConsistentState, Mechanism
 from .solvers import (
     GeneralizedAlpha,
     LocateEvents,
+    MechanismODESolver,
     MechanismState,
     MechanismTerm,
     solver_by_name,
@@ -148,6 +149,23 @@ class ReplaySteps(dfx.AbstractStepSizeController):
         next_t1 = self.times[jnp.minimum(index, self.times.shape[0] - 1)]
         result = dfx.RESULTS.where(jnp.isfinite(next_t1), dfx.RESULTS.successful, self.failure)
         return True, t1, next_t1, False, index + 1, result
+
+
+def _inner_scan_kind_for(adjoint, solver):
+    """The stage loop of a Runge–Kutta method inside `MechanismODESolver`, set as diffrax sets
+    it for a bare one (`diffrax/_adjoint.py`, "Support forward-mode autodiff"): under
+    `ForwardMode` a plain `lax` loop, under `DirectAdjoint` a bounded one. Its default, a
+    checkpointed loop, is a `custom_vjp`, which forward-mode differentiation cannot enter;
+    diffrax's own switch does not see a solver wrapped in ours."""
+    if not isinstance(solver, MechanismODESolver):
+        return solver
+    inner = solver.solver
+    if not isinstance(inner, dfx.AbstractRungeKutta) or inner.scan_kind is not None:
+        return solver
+    kind = {dfx.ForwardMode: "lax", dfx.DirectAdjoint: "bounded"}.get(type(adjoint))
+    if kind is None:
+        return solver
+    return replace(solver, solver=replace(inner, scan_kind=kind))
 
 
 def _integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **options):
@@ -329,6 +347,7 @@ def simulate(
     if not control.adaptive and isinstance(solver, GeneralizedAlpha):
         solver = replace(solver, estimate_error=False)
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
+    solver = _inner_scan_kind_for(adjoint, solver)
     y0 = MechanismState(initial.q, initial.v, initial.qdd, initial.lam, initial.memory)
     ts = _save_times(t0, t_end, n_save, ts)
     # Times are data too: a new t_end or t0 does not recompile.
