@@ -55,6 +55,7 @@ for label in ("simulate_first_call", "simulate_second_call"):
 out["n_steps"] = int(traj.stats["num_accepted_steps"])
 out["n_rejected"] = int(traj.stats["num_rejected_steps"])
 out["status"] = traj.status()
+out["solver"] = scene.default_control.get("solver", "generalized_alpha")
 t = time.perf_counter()
 ideal_reference(scene, params, traj)
 out["ideal_reference"] = time.perf_counter() - t
@@ -146,7 +147,7 @@ def main() -> int:
         f"core count inflates every number below). Medians of {REPEATS} fresh processes.",
         "",
         f"The run: {r0['n_steps']} accepted and {r0['n_rejected']} rejected adaptive",
-        f"generalized-α steps, status `{r0['status']}`.",
+        f"steps of the scene's default solver, `{r0['solver']}`, status `{r0['status']}`.",
         "",
         "| phase | wall time [s] |",
         "|---|---|",

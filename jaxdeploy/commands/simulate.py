@@ -112,7 +112,12 @@ def run(args) -> int:
         "status": trajectory.status(),
         "n_steps": int(trajectory.stats["num_accepted_steps"]),
         "n_rejected": int(trajectory.stats["num_rejected_steps"]),
-        "n_newton_iterations": int(trajectory.stats.get("num_newton_iterations", -1)),
+        # Newton iterations exist only for generalized-α; null for the explicit diffrax path.
+        "n_newton_iterations": (
+            int(trajectory.stats["num_newton_iterations"])
+            if "num_newton_iterations" in trajectory.stats
+            else None
+        ),
         "wall_time_s": wall,
         "wall_time_includes": "compilation and run",
     }
