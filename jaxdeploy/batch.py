@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .lanes import DEFAULT_SEGMENT_STEPS, check_lane_options, check_lanes, simulate_in_lanes
 from .scenes.base import Scene
 from .simulation import Trajectory, simulate
 
@@ -122,6 +123,9 @@ def batch_function(
     control: Mapping | None = None,
     evaluate=None,
     group_size: int | None = None,
+    lanes: int | None = None,
+    segment_steps: int = DEFAULT_SEGMENT_STEPS,
+    sharding=None,
     **simulate_options,
 ):
     """The jitted, vmapped run of `scene` over the `varied` parameters (the rest `shared`).
@@ -138,16 +142,77 @@ def batch_function(
     runs until its slowest case converges, so smaller groups waste less on stragglers, and
     their arrays stay in cache; `None` (default) vmaps all cases at once. Measured in
     docs/batch_throughput.md.
+
+    `lanes`: instead, integrate the cases in that many vmapped lanes, a lane that finishes its
+    case taking the next pending one after at most `segment_steps` steps
+    (`jaxdeploy.lanes`): no lane idles while cases remain, only the last few cases' lanes.
+    Each case takes the steps a vmapped group gives it, its states equal to round-off.
+
+    `sharding` (a `NamedSharding` over a 1-D mesh, as `jaxdeploy.sweep` places its inputs):
+    each device runs the policy on its own shard of the cases (`jax.shard_map`), with no
+    communication (lanes, groups or the vmap are per device).
     """
+    check_policy(group_size, lanes, segment_steps)
 
     def one(varied_values):
         params = {**shared, **dict(zip(varied, varied_values, strict=True))}
         trajectory = run_scene(scene, params, t_end, ts=ts, control=control, **simulate_options)
         return trajectory if evaluate is None else (trajectory, evaluate(params, trajectory))
 
-    if group_size is None:
-        return jax.jit(jax.vmap(one))
-    return jax.jit(lambda values: jax.lax.map(one, values, batch_size=group_size))
+    if lanes is not None:
+        options = {**step_control(scene, control), **simulate_options}
+        check_lane_options(options)
+
+        def prepare(varied_values):
+            params = {**shared, **dict(zip(varied, varied_values, strict=True))}
+            mechanism = scene.build(params)
+            return mechanism, scene.initial_state(params, mechanism)
+
+        def in_lanes(values):
+            trajectory = simulate_in_lanes(
+                prepare,
+                values,
+                t_end,
+                ts,
+                lanes=lanes,
+                segment_steps=segment_steps,
+                options=options,
+            )
+            if evaluate is None:
+                return trajectory
+
+            def features(varied_values, case):
+                return evaluate({**shared, **dict(zip(varied, varied_values, strict=True))}, case)
+
+            return trajectory, jax.vmap(features)(values, trajectory)
+
+        run = in_lanes
+    elif group_size is None:
+        run = jax.vmap(one)
+    else:
+        run = lambda values: jax.lax.map(one, values, batch_size=group_size)  # noqa: E731
+    if sharding is None:
+        return jax.jit(run)
+    cases = jax.sharding.PartitionSpec(*sharding.spec)
+    return jax.jit(
+        jax.shard_map(run, mesh=sharding.mesh, in_specs=cases, out_specs=cases, check_vma=False)
+    )
+
+
+def check_policy(group_size, lanes, segment_steps=DEFAULT_SEGMENT_STEPS) -> None:
+    """Refuse a batch policy that is not one of: all at once (both None), `group_size` ≥ 1,
+    `lanes` ≥ 1 (with `segment_steps` ≥ 1)."""
+    if group_size is not None and not (
+        isinstance(group_size, int) and not isinstance(group_size, bool) and group_size >= 1
+    ):
+        raise ValueError(f"group_size = {group_size!r} is invalid: it must be an integer ≥ 1")
+    if lanes is not None:
+        check_lanes(lanes, segment_steps)
+        if group_size is not None:
+            raise ValueError(
+                f"group_size = {group_size!r} and lanes = {lanes!r}: give one batch policy, "
+                "not both"
+            )
 
 
 def simulate_batch(
@@ -160,6 +225,8 @@ def simulate_batch(
     n_save: int = 1001,
     control: Mapping | None = None,
     group_size: int | None = None,
+    lanes: int | None = None,
+    segment_steps: int = DEFAULT_SEGMENT_STEPS,
     **simulate_options,
 ) -> Batch:
     """Simulate many parameter sets of `scene` as one vmapped run (one compilation).
@@ -172,13 +239,16 @@ def simulate_batch(
       every case (same saved times).
     - `group_size`: vmap the cases in groups of this many, run one after another in the same
       compiled program (see `batch_function`); `None` vmaps all at once.
+    - `lanes`: run the cases in this many refilled lanes instead (`jaxdeploy.lanes`): a lane
+      that finishes its case takes the next, so no case waits for a slower one (adaptive
+      steps; only `simulate`'s step-control and solver options). `segment_steps`: steps
+      between refills.
 
     **Returns:** a `Batch`. Cases advance together in one `while` loop: each step costs the
     whole batch, and the batch runs until its slowest case finishes (cases that finished
-    early wait, masked). Group cases of similar stiffness for the best throughput.
+    early wait, masked), unless `lanes` refills them. Measured: docs/batch_throughput.md.
     """
-    if group_size is not None and not (isinstance(group_size, int) and group_size >= 1):
-        raise ValueError(f"group_size = {group_size!r} is invalid: it must be an integer ≥ 1")
+    check_policy(group_size, lanes, segment_steps)
     table, varied, shared = _stack_cases(scene, cases, fixed)
     t_end = scene.default_t_end if t_end is None else t_end
     ts = jnp.linspace(0.0, t_end, n_save) if ts is None else jnp.asarray(ts, dtype=float)
@@ -191,6 +261,8 @@ def simulate_batch(
             ts,
             control=control,
             group_size=group_size,
+            lanes=lanes,
+            segment_steps=segment_steps,
             **simulate_options,
         )
         trajectory = run(tuple(jnp.asarray(table[k]) for k in varied))

@@ -9,6 +9,7 @@ status that says when and why a run failed (never silent NaN).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import diffrax as dfx
 import equinox as eqx
@@ -330,6 +331,85 @@ def simulate(
     **Returns:** a `Trajectory`; check `.ok` / `.status()`: a failed solve keeps the states it
     finished and says when and why it stopped.
     """
+    run = _setup(
+        mechanism,
+        initial,
+        t_end,
+        t0=t0,
+        dt=dt,
+        rtol=rtol,
+        atol=atol,
+        dt_min=dt_min,
+        dt_max=dt_max,
+        max_steps=max_steps,
+        n_save=n_save,
+        ts=ts,
+        solver=solver,
+        adjoint=adjoint,
+        step_ts=step_ts,
+        replay_steps=replay_steps,
+        locate_events=locate_events,
+    )
+    sol = _solve(
+        mechanism,
+        run.y0,
+        run.t0,
+        run.t_end,
+        run.dt0,
+        run.ts,
+        run.solver,
+        run.controller,
+        run.max_steps,
+        progress,
+        run.adjoint,
+    )
+    return Trajectory(
+        sol.ts,
+        *_saved(sol.ys),
+        sol.result,
+        solver_stats(sol.stats, sol.solver_state),
+        run.step_times,
+    )
+
+
+class _Setup(NamedTuple):
+    """A run of `simulate` after validation and defaults: what `diffeqsolve` gets."""
+
+    y0: MechanismState
+    t0: jax.Array
+    t_end: jax.Array
+    dt0: jax.Array
+    ts: jax.Array
+    solver: object
+    controller: object
+    max_steps: int
+    adjoint: object
+    step_times: jax.Array | None
+
+
+def _setup(
+    mechanism,
+    initial,
+    t_end,
+    *,
+    t0=0.0,
+    dt=None,
+    rtol=None,
+    atol=None,
+    dt_min=None,
+    dt_max=None,
+    max_steps=2_000_000,
+    n_save=1001,
+    ts=None,
+    solver=None,
+    adjoint=None,
+    step_ts=None,
+    replay_steps=False,
+    locate_events=True,
+) -> _Setup:
+    """Validate `simulate`'s arguments and build its solver, step-size controller, initial
+    state and times (shared with the lane-refilled batches of `jaxdeploy.lanes`, which must
+    integrate every case exactly as `simulate` does)."""
     _check_step_control(rtol, atol, dt_min, dt_max, max_steps)
     if isinstance(solver, str):
         solver = solver_by_name(solver, rtol=rtol, atol=atol)
@@ -373,23 +453,22 @@ def simulate(
     elif replay_steps is not False and replay_steps is not None:
         step_times = _replay_times(replay_steps, t0, t_end)
         controller = ReplaySteps(step_times, dfx.RESULTS.successful)
-    sol = _solve(
-        mechanism,
-        y0,
-        t0,
-        t_end,
-        dt0,
-        ts,
-        solver,
-        controller,
-        control.max_steps,
-        progress,
-        adjoint,
+    return _Setup(
+        y0, t0, t_end, dt0, ts, solver, controller, control.max_steps, adjoint, step_times
     )
-    ys = sol.ys
-    stats = dict(sol.stats)
-    if sol.solver_state is not None and hasattr(sol.solver_state, "newton_iterations"):
-        stats["num_newton_iterations"] = sol.solver_state.newton_iterations
-    if sol.solver_state is not None and hasattr(sol.solver_state, "jacobian_evaluations"):
-        stats["num_jacobian_evaluations"] = sol.solver_state.jacobian_evaluations
-    return Trajectory(sol.ts, ys.q, ys.v, ys.qdd, ys.lam, ys.memory, sol.result, stats, step_times)
+
+
+def _saved(ys: MechanismState) -> tuple:
+    """`(q, v, qdd, lam, memory)` of saved states."""
+    return ys.q, ys.v, ys.qdd, ys.lam, ys.memory
+
+
+def solver_stats(stats, solver_state) -> dict:
+    """diffrax's step counts with the solver's own counters (generalized-α's Newton
+    iterations and Jacobian evaluations), as `Trajectory.stats`."""
+    stats = dict(stats)
+    if solver_state is not None and hasattr(solver_state, "newton_iterations"):
+        stats["num_newton_iterations"] = solver_state.newton_iterations
+    if solver_state is not None and hasattr(solver_state, "jacobian_evaluations"):
+        stats["num_jacobian_evaluations"] = solver_state.jacobian_evaluations
+    return stats

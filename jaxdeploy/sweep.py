@@ -3,10 +3,12 @@ resumable after a crash.
 
 The cases are the Cartesian product of the grid, in a fixed order (the last name varies
 fastest); case `i` is always the same parameter set. They run in chunks of `chunk_size` cases:
-each chunk is one vmapped simulation (`batch.batch_function`, compiled once for the sweep)
-whose batch axis is sharded over all local devices (a `NamedSharding` over a 1-D mesh of
+each chunk is one compiled batch (`batch.batch_function`, compiled once for the sweep) whose
+batch axis is sharded over all local devices (a `NamedSharding` over a 1-D mesh of
 `jax.devices()`; the chunk is padded to a multiple of the device count with copies of its last
 case, dropped on output), so memory is bounded by one chunk, whatever the number of cases.
+Each device batches its shard by the sweep's `policy` (default: refilled lanes, the cheapest
+per simulation measured in docs/batch_throughput.md; see `parse_policy`).
 
 Each finished chunk is written atomically as `chunk_NNNNN.npz` (case indices, parameters,
 status, step counts, optional per-case features and trajectories), then recorded in
@@ -14,7 +16,7 @@ status, step counts, optional per-case features and trajectories), then recorded
 manifest and its file exists, so a kill at any moment loses at most the running chunk; `resume`
 re-runs exactly the chunks not yet recorded: no case is lost or duplicated. The manifest stores
 the sweep's definition (scene, grid, fixed parameters, times, step control, chunk size,
-versions); resuming with a different definition is refused.
+policy, versions); resuming with a different definition is refused.
 
 Multi-host (`jax.distributed`): start the same command on every host after
 `jax.distributed.initialize()` (the `--distributed` flag calls it, reading the coordinator
@@ -43,6 +45,49 @@ from .io import atomic_write_json, atomic_write_npz, run_metadata
 from .scenes.base import Scene
 
 MANIFEST = "manifest.json"
+# How each chunk is batched (`parse_policy`), measured in docs/batch_throughput.md: lanes
+# refilled from the pending cases cost the least per simulation. One vmap of the whole chunk
+# (the only policy before; "all") cost the most: every case waits for the chunk's slowest.
+DEFAULT_POLICY = "lanes:8"
+# Cases per chunk: with lanes, a chunk must hold several times (lanes x devices) cases, or
+# only the tail of each chunk runs (its lanes idle as its last cases finish).
+DEFAULT_CHUNK_SIZE = 64
+
+
+def parse_policy(text: str) -> dict:
+    """A batch policy, as the manifest records it: `"all"` (one vmap of the chunk),
+    `"groups:G"` (vmapped groups of G one after another) or `"lanes:L"` / `"lanes:L:K"` (L
+    lanes per device refilled every K steps, `jaxdeploy.lanes`; K default
+    `lanes.DEFAULT_SEGMENT_STEPS`). Anything else is refused, naming the valid forms."""
+    from .lanes import DEFAULT_SEGMENT_STEPS
+
+    parts = str(text).strip().split(":")
+    try:
+        numbers = [int(p) for p in parts[1:]]
+    except ValueError:
+        numbers = None
+    kind = parts[0]
+    valid = numbers is not None and all(n >= 1 for n in numbers)
+    if kind == "all" and valid and not numbers:
+        return {"kind": "all"}
+    if kind == "groups" and valid and len(numbers) == 1:
+        return {"kind": "groups", "group_size": numbers[0]}
+    if kind == "lanes" and valid and len(numbers) in (1, 2):
+        steps = numbers[1] if len(numbers) == 2 else DEFAULT_SEGMENT_STEPS
+        return {"kind": "lanes", "lanes": numbers[0], "segment_steps": steps}
+    raise ValueError(
+        f"policy = {text!r} is invalid; valid: 'all', 'groups:G' or 'lanes:L[:K]' with "
+        "integers G, L, K ≥ 1"
+    )
+
+
+def _policy_options(policy: dict) -> dict:
+    """`batch_function` keywords of a parsed policy."""
+    if policy["kind"] == "groups":
+        return {"group_size": policy["group_size"]}
+    if policy["kind"] == "lanes":
+        return {"lanes": policy["lanes"], "segment_steps": policy["segment_steps"]}
+    return {}
 
 
 def grid_cases(grid: Mapping[str, list]) -> dict[str, np.ndarray]:
@@ -57,7 +102,7 @@ def grid_cases(grid: Mapping[str, list]) -> dict[str, np.ndarray]:
     return {name: np.array([float(r[i]) for r in rows]) for i, name in enumerate(grid)}
 
 
-def _definition(scene, grid, fixed, t_end, n_save, control, chunk_size, features) -> dict:
+def _definition(scene, grid, fixed, t_end, n_save, control, chunk_size, features, policy) -> dict:
     return {
         "scene": scene.name,
         "grid": {k: [float(v) for v in vs] for k, vs in grid.items()},
@@ -67,6 +112,8 @@ def _definition(scene, grid, fixed, t_end, n_save, control, chunk_size, features
         "control": {k: _control_value(v) for k, v in control.items()},
         "chunk_size": int(chunk_size),
         "features": features,
+        # The policy can change a case's round-off and so its steps (jaxdeploy.lanes).
+        "policy": policy,
     }
 
 
@@ -117,7 +164,8 @@ def sweep(
     n_save: int = 201,
     fixed: Mapping | None = None,
     control: Mapping | None = None,
-    chunk_size: int = 16,
+    chunk_size: int = DEFAULT_CHUNK_SIZE,
+    policy: str = DEFAULT_POLICY,
     resume: bool = False,
     evaluate: Callable | None = None,
     features: str | None = None,
@@ -130,8 +178,11 @@ def sweep(
 
     **Arguments:**
     - `grid`: `{name: [values]}`; `fixed`: other parameters (defaults otherwise).
-    - `chunk_size`: cases per vmapped run (bounds memory; rounded up to a multiple of the
+    - `chunk_size`: cases per compiled run (bounds memory; rounded up to a multiple of the
       device count).
+    - `policy`: how a chunk's cases are batched on each device (`parse_policy`): `"lanes:L"`
+      (default `DEFAULT_POLICY`), `"groups:G"` or `"all"`. Recorded in the definition: it
+      can change a case's round-off and hence its steps.
     - `resume`: continue a sweep in `out_dir` (its definition must match); without it a
       non-empty `out_dir` is refused.
     - `evaluate(params, trajectory) -> {name: scalar}`: per-case features computed inside the
@@ -144,8 +195,9 @@ def sweep(
     """
     t_end = scene.default_t_end if t_end is None else float(t_end)
     control = step_control(scene, control)
-    if chunk_size < 1:
-        raise ValueError(f"chunk_size = {chunk_size!r} is invalid: it must be ≥ 1")
+    if not (isinstance(chunk_size, int) and chunk_size >= 1):
+        raise ValueError(f"chunk_size = {chunk_size!r} is invalid: it must be an integer ≥ 1")
+    parsed_policy = parse_policy(policy)
     cases = grid_cases(grid)
     n_cases = len(next(iter(cases.values())))
     # Validate every case before anything runs (names, ranges), and split varied names.
@@ -155,7 +207,9 @@ def sweep(
         varied, shared = (first,), {k: v for k, v in shared.items() if k != first}
     sharding, n_devices = _device_mesh()
     chunk_size = n_devices * math.ceil(chunk_size / n_devices)
-    definition = _definition(scene, grid, fixed, t_end, n_save, control, chunk_size, features)
+    definition = _definition(
+        scene, grid, fixed, t_end, n_save, control, chunk_size, features, parsed_policy
+    )
     manifest_path = os.path.join(out_dir, MANIFEST)
     writer = jax.process_index() == 0
 
@@ -166,6 +220,8 @@ def sweep(
                 "another --out"
             )
         manifest = _read_manifest(manifest_path)
+        # Sweeps written before the policy was recorded ran each chunk as one vmap.
+        manifest["definition"].setdefault("policy", {"kind": "all"})
         if manifest["definition"] != definition:
             raise ValueError(
                 f"--resume: the sweep in {out_dir!r} was defined differently "
@@ -197,7 +253,15 @@ def sweep(
     todo = [k for k in range(n_chunks) if k not in done]
     ts = jnp.linspace(0.0, t_end, n_save)
     run = batch_function(
-        scene, varied, shared, t_end, ts, control=control, evaluate=_wrap(evaluate)
+        scene,
+        varied,
+        shared,
+        t_end,
+        ts,
+        control=control,
+        evaluate=_wrap(evaluate),
+        sharding=sharding,
+        **_policy_options(parsed_policy),
     )
     bar = _progress(progress, n_cases, sum(c["stop"] - c["start"] for c in manifest["chunks"]))
     for count, k in enumerate(todo):

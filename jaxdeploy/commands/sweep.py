@@ -1,6 +1,6 @@
-"""`jaxdeploy sweep --scene S --grid NAME=v1,v2,... --out DIR [--resume]`: run the Cartesian
-product of parameter values as vmapped chunks sharded over all devices, written chunk by
-chunk, resumable (see `jaxdeploy.sweep`)."""
+"""`jaxdeploy sweep --scene S --grid NAME=v1,v2,... --out DIR [--resume] [--policy P]`: run the
+Cartesian product of parameter values as batched chunks sharded over all devices, written
+chunk by chunk, resumable (see `jaxdeploy.sweep`)."""
 
 from __future__ import annotations
 
@@ -26,7 +26,21 @@ def add_arguments(parser) -> None:
     parser.add_argument("--resume", action="store_true", help="continue the sweep in --out")
     parser.add_argument("--t-end", type=float, default=None, help="end time [s]")
     parser.add_argument("--n-save", type=int, default=201, help="saved states per case")
-    parser.add_argument("--chunk-size", type=int, default=16, help="cases per vmapped run")
+    parser.add_argument(
+        "--chunk-size",
+        type=int,
+        default=None,
+        help="cases per compiled run (memory, resume granularity); default "
+        "jaxdeploy.sweep.DEFAULT_CHUNK_SIZE",
+    )
+    parser.add_argument(
+        "--policy",
+        default=None,
+        metavar="POLICY",
+        help="how each device batches its cases: lanes:L[:K] (L lanes refilled every K steps, "
+        "the default lanes:8), groups:G (vmapped groups of G) or all (one vmap); recorded in "
+        "the manifest (docs/batch_throughput.md)",
+    )
     parser.add_argument(
         "--objective",
         action="append",
@@ -85,7 +99,7 @@ def run(args) -> int:
         jax.distributed.initialize()
 
     from ..scenes import SCENES, get_scene
-    from ..sweep import sweep
+    from ..sweep import DEFAULT_CHUNK_SIZE, DEFAULT_POLICY, sweep
     from .simulate import parse_assignments
 
     if args.scene not in SCENES:
@@ -123,7 +137,8 @@ def run(args) -> int:
             n_save=args.n_save,
             fixed=fixed,
             control=control,
-            chunk_size=args.chunk_size,
+            chunk_size=DEFAULT_CHUNK_SIZE if args.chunk_size is None else args.chunk_size,
+            policy=DEFAULT_POLICY if args.policy is None else args.policy,
             resume=args.resume,
             evaluate=evaluate,
             features=features,
