@@ -4,7 +4,8 @@ simulations run one at a time with the same solver, measured side by side in one
 
     PYTHONPATH=. python experiments/batch_throughput.py [--scene deploy_array] [--batch 256]
         [--t-end 0.01] [--repeats 1] [--solver generalized_alpha tsit5 ...]
-        [--groups all,32] [--sorted] [--out docs/batch_throughput.json] [--doc PAGE]
+        [--groups all,32] [--sorted] [--lanes 16] [--segment-steps 8] [--two-cores lanes:16]
+        [--out docs/batch_throughput.json] [--doc PAGE]
 
 The B cases scatter the varied parameters around the scene's defaults (deploy_array: panel1_ra,
 panel2_ra, panel1_clearance, panel2_clearance), x_i = x0 e^{s ξ_i}, ξ_i ~ N(0, 1) seeded, s =
@@ -22,7 +23,16 @@ e.g. `tsit5`, the index-1 ODE with projection) the same B cases are run:
   groups of G consecutive cases run one after another inside one compiled program
   (`batch_function(group_size=G)`);
 * with `--sorted`, the same groups over the cases reordered by their step count alone (an
-  oracle: the best any ordering can do; see the page).
+  oracle: the best any ordering can do; see the page);
+* one row per `--lanes` entry L: the cases in L vmapped lanes, a lane that finishes its case
+  taking the next after at most `--segment-steps` steps (`batch_function(lanes=L)`,
+  `jaxdeploy.lanes`);
+* with `--two-cores POLICY` (e.g. `lanes:16`), the batch sharded over 2 forced host devices
+  (`XLA_FLAGS=--xla_force_host_platform_device_count=2`, as `jaxdeploy sweep` runs) in a
+  child process pinned to two cores, each device running the policy on its half of the
+  cases, timed in turn with the rows above. Its wall-time ratio to the 1-core `alone` run is
+  throughput on this CPU (two cores against one), its CPU-time ratio the cost per
+  core-second.
 
 Times are medians over `--repeats` interleaved calls of the compiled programs (every variant
 once per repeat, in turn); the ratio to the same solver's `alone` row, not the absolute time,
@@ -63,7 +73,7 @@ SOLVERS = (
     *(name for name in SOLVER_NAMES if name != "generalized_alpha"),
 )
 SOLVER_TITLES = {
-    "generalized_alpha": 'generalized-α, modified Newton (`newton="modified"`, the default)',
+    "generalized_alpha": 'generalized-α, modified Newton (`newton="modified"`)',
     "generalized_alpha_full": 'generalized-α, Newton proper (`newton="full"`)',
 }
 DEFAULT_SOLVER = "generalized_alpha"
@@ -101,6 +111,125 @@ def parse_groups(text: str) -> list:
     return groups
 
 
+def parse_lanes(text: str) -> list[int]:
+    """`"8,16"` -> `[8, 16]` (empty: none), refusing anything else by name."""
+    out = []
+    for item in filter(None, (x.strip() for x in text.split(","))):
+        if not (item.isdigit() and int(item) >= 1):
+            raise SystemExit(f"--lanes: {item!r} is invalid; give integers ≥ 1")
+        out.append(int(item))
+    return out
+
+
+def policy_steps_run(steps, policy: dict, devices: int = 1, segment: int = 8) -> int:
+    """Case-steps a batch policy (`jaxdeploy.sweep.parse_policy` form) runs over `steps`
+    split evenly over `devices`, each device running the policy on its consecutive share."""
+    steps = np.asarray(steps)
+    total = 0
+    for part in np.split(steps, devices):
+        if policy["kind"] == "lanes":
+            total += lane_steps_run(part, policy["lanes"], policy.get("segment_steps", segment))
+        else:
+            total += case_steps_run(part, policy.get("group_size", "all"))
+    return total
+
+
+class TwoCores:
+    """The batch sharded over 2 forced host devices, in a child process pinned to `cores`
+    (this process is pinned to one; XLA's device count is fixed when JAX starts, hence the
+    child). It compiles on start and times one call per `run()`, so that its calls take
+    turns with this process's rows under the same load."""
+
+    def __init__(self, argv, solver, cores):
+        import subprocess
+
+        env = dict(os.environ)
+        flags = env.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2"
+        env["XLA_FLAGS"] = flags.strip()
+        env["BATCH_THROUGHPUT_CORES"] = ",".join(str(c) for c in cores)
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        env["PYTHONPATH"] = root + os.pathsep + env.get("PYTHONPATH", "")
+        command = [sys.executable, os.path.abspath(__file__), *argv, "--child"]
+        command += ["--solver", solver]
+        self.process = subprocess.Popen(
+            command, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+        )
+        self.compile_s = self._answer()["ready"]
+
+    def _answer(self) -> dict:
+        for line in self.process.stdout:
+            if line.startswith("@@"):
+                return json.loads(line[2:])
+        raise RuntimeError(f"--two-cores child ended (exit code {self.process.wait()})")
+
+    def run(self):
+        """`(wall s, CPU s of the child, counts)` of one call of the sharded batch."""
+        from types import SimpleNamespace
+
+        self.process.stdin.write("run\n")
+        self.process.stdin.flush()
+        got = self._answer()
+        counts = SimpleNamespace(
+            stats={k: np.asarray(got[k]) for k in ("num_steps", "num_accepted_steps")},
+            result=SimpleNamespace(_value=np.asarray(got["result"])),
+        )
+        return got["wall"], got["cpu"], counts
+
+    def close(self):
+        self.process.stdin.close()
+        self.process.wait()
+
+
+def child(args) -> None:
+    """`--two-cores`'s child (see `TwoCores`): compile the sharded batch, then time one call
+    per `run` line on stdin, answering `@@{json}` lines on stdout."""
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    from jaxdeploy.sweep import _policy_options, parse_policy
+
+    cores = {int(c) for c in os.environ["BATCH_THROUGHPUT_CORES"].split(",")}
+    for task in os.listdir("/proc/self/task"):
+        os.sched_setaffinity(int(task), cores)
+    devices = jax.devices()
+    if len(devices) != 2:
+        raise SystemExit(f"--two-cores child: {len(devices)} devices, 2 expected")
+    sharding = NamedSharding(Mesh(np.array(devices), ("cases",)), PartitionSpec("cases"))
+    scene = get_scene(args.scene)
+    table, varied, shared = _stack_cases(
+        scene, cases(scene, args.batch, args.spread, args.seed), None
+    )
+    ts = jnp.linspace(0.0, args.t_end, args.n_save)
+    policy = parse_policy(args.two_cores)
+    if policy["kind"] == "lanes" and ":" not in args.two_cores[len("lanes:") :]:
+        policy["segment_steps"] = args.segment_steps
+    program = batch_function(
+        scene,
+        varied,
+        shared,
+        args.t_end,
+        ts,
+        solver=solver_argument(args.solver[0]),
+        sharding=sharding,
+        **_policy_options(policy),
+    )
+    inputs = tuple(jax.device_put(jnp.asarray(table[k]), sharding) for k in varied)
+    start = time.perf_counter()
+    compiled = program.lower(inputs).compile()
+    print("@@" + json.dumps({"ready": time.perf_counter() - start}), flush=True)
+    for line in sys.stdin:
+        if line.strip() != "run":
+            break
+        wall, cpu, (out,) = time_batch(compiled, inputs)
+        answer = {
+            "wall": wall,
+            "cpu": cpu,
+            "num_steps": _per_case([out], "num_steps"),
+            "num_accepted_steps": _per_case([out], "num_accepted_steps"),
+            "result": [int(x) for x in np.ravel(np.asarray(out.result._value))],
+        }
+        print("@@" + json.dumps(answer), flush=True)
+
+
 def group_slices(batch: int, group) -> list[slice]:
     """The cases each vmapped group holds: `lax.map(batch_size=G)` runs consecutive groups of
     G and the remainder as one last group."""
@@ -115,10 +244,33 @@ def case_steps_run(steps, group) -> int:
     return int(sum((s.stop - s.start) * steps[s].max() for s in group_slices(len(steps), group)))
 
 
+def lane_steps_run(steps, lanes: int, segment: int) -> int:
+    """Case-steps a lane-refilled batch runs (`jaxdeploy.lanes`), replaying its schedule from
+    the cases' step counts: every segment, each of the `lanes` lanes (busy or not) takes as
+    many loop iterations as the busiest lane takes steps in it (≤ `segment`); a lane whose
+    case finished takes the next case in order for the next segment."""
+    pending = [int(n) for n in steps]
+    lanes = min(lanes, len(pending))
+    left = pending[:lanes]  # steps each lane's case still needs (0: idle)
+    following = lanes
+    total = 0
+    while any(left):
+        taken = [min(n, segment) for n in left]
+        total += lanes * max(taken)
+        left = [n - k for n, k in zip(left, taken, strict=True)]
+        for i, n in enumerate(left):
+            if n == 0 and taken[i] > 0 and following < len(pending):
+                left[i] = pending[following]
+                following += 1
+    return total
+
+
 def _label(policy) -> str:
     kind, group = policy
     if kind == "alone":
         return "alone"
+    if kind == "lanes":
+        return f"{group} lanes, refilled"
     name = "vmap all" if group == "all" else f"groups of {group}"
     return name + (", sorted" if kind == "sorted" else "")
 
@@ -187,6 +339,18 @@ def main(argv=None):
         action="store_true",
         help="also run the integer groups over the cases sorted by their steps alone",
     )
+    ap.add_argument(
+        "--lanes", default="", help="lane counts of refilled-lane rows, comma-separated"
+    )
+    ap.add_argument("--segment-steps", type=int, default=8, help="steps between refills")
+    ap.add_argument(
+        "--two-cores",
+        default=None,
+        metavar="POLICY",
+        help="also run the batch sharded over 2 devices on 2 cores with this policy "
+        "(jaxdeploy.sweep.parse_policy: all, groups:G, lanes:L[:K])",
+    )
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--no-parts", action="store_true", help="skip the Newton-iteration parts")
     ap.add_argument(
         "--cores",
@@ -209,8 +373,24 @@ def main(argv=None):
         return stored
     if args.batch < 1:
         raise SystemExit(f"--batch {args.batch} is invalid: it must be ≥ 1")
+    if args.child:
+        return child(args)
+    allowed = sorted(os.sched_getaffinity(0))
     cores = pin_cores(args.cores)
     groups = parse_groups(args.groups)
+    lanes = parse_lanes(args.lanes)
+    if args.segment_steps < 1:
+        raise SystemExit(f"--segment-steps {args.segment_steps} is invalid: it must be ≥ 1")
+    two_cores = None
+    if args.two_cores is not None:
+        from jaxdeploy.sweep import parse_policy
+
+        try:
+            two_cores = parse_policy(args.two_cores)
+        except ValueError as err:
+            raise SystemExit(f"--two-cores: {err}") from None
+        if len(allowed) < 2 or args.batch % 2:
+            raise SystemExit("--two-cores needs 2 allowed cores and an even --batch")
     scene = get_scene(args.scene)
     table, varied, shared = _stack_cases(
         scene, cases(scene, args.batch, args.spread, args.seed), None
@@ -230,6 +410,9 @@ def main(argv=None):
         "cases": {k: [float(x) for x in table[k]] for k in varied},
         "solvers": list(args.solver),
         "groups": groups,
+        "lanes": lanes,
+        "segment_steps": args.segment_steps,
+        "two_cores_policy": two_cores,
         "control": step_control(scene),
         "cores": cores,
         "cores_requested": args.cores,
@@ -247,12 +430,20 @@ def main(argv=None):
     # Every (solver, policy) compiled ahead of time.
     programs = {}
     for solver in args.solver:
-        make = lambda group, solver=solver: batch_function(  # noqa: E731
-            scene, varied, shared, args.t_end, ts, group_size=group, solver=solver_argument(solver)
+        make = lambda group, solver=solver, **policy: batch_function(  # noqa: E731
+            scene,
+            varied,
+            shared,
+            args.t_end,
+            ts,
+            group_size=group,
+            solver=solver_argument(solver),
+            **policy,
         )
         policies = [("alone", None)] + [("given", g) for g in groups]
         if args.sorted:
             policies += [("sorted", g) for g in groups if g != "all"]
+        policies += [("lanes", n) for n in lanes]
         for kind, group in policies:
             label = _label((kind, group))
             inputs = singles[0] if kind == "alone" else stacked
@@ -260,7 +451,10 @@ def main(argv=None):
                 compiled = programs[(solver, _label(("given", group)))][2]
                 compile_s = result["runs"][solver][_label(("given", group))]["compile_s"]
             else:
-                program = make(None if group in (None, "all") else group)
+                if kind == "lanes":
+                    program = make(None, lanes=group, segment_steps=args.segment_steps)
+                else:
+                    program = make(None if group in (None, "all") else group)
                 start = time.perf_counter()
                 compiled = program.lower(inputs).compile()
                 compile_s = time.perf_counter() - start
@@ -273,6 +467,20 @@ def main(argv=None):
                 "cpus_s": [],
             }
             print(f"{solver} / {label}: compiled in {compile_s:.1f} s", flush=True)
+        if two_cores is not None:
+            process = TwoCores(argv, solver, allowed[:2])
+            label = f"2 cores: {args.two_cores}"
+            programs[(solver, label)] = ("two_cores", None, process)
+            result["runs"][solver][label] = {
+                "kind": "two_cores",
+                "group": None,
+                "policy": two_cores,
+                "cores": allowed[:2],
+                "compile_s": process.compile_s,
+                "walls_s": [],
+                "cpus_s": [],
+            }
+            print(f"{solver} / {label}: compiled in {process.compile_s:.1f} s", flush=True)
 
     # Interleaved: every variant once per repeat, so that all see the same load. The sorted
     # order comes from the first repeat's `alone` run of the same solver (its steps per case).
@@ -282,6 +490,10 @@ def main(argv=None):
             if kind == "alone":
                 wall, cpu, outs = time_alone(compiled, singles)
                 order = np.arange(args.batch)
+            elif kind == "two_cores":
+                wall, cpu, counts = compiled.run()
+                order = np.arange(args.batch)
+                outs = [counts]
             else:
                 if kind == "sorted":
                     alone_steps = result["runs"][solver]["alone"]["num_steps"]
@@ -307,6 +519,9 @@ def main(argv=None):
         derive(result)
         save()
 
+    for kind, _group, program in programs.values():
+        if kind == "two_cores":
+            program.close()
     sizes = [g for g in groups if g != "all"]
     if not args.no_parts:
         # Where a step's time goes, per case: alone and in a vmapped group.
@@ -390,7 +605,17 @@ def derive(r) -> None:
                 continue
             # The groups hold the cases in the order the batch got them.
             steps_in_order = np.asarray(rec["num_steps"])[rec["order"]]
-            rec["case_steps_run"] = case_steps_run(steps_in_order, rec["group"])
+            if rec["kind"] == "lanes":
+                policy = {"kind": "lanes", "lanes": rec["group"]}
+                rec["case_steps_run"] = policy_steps_run(
+                    steps_in_order, policy, segment=r["segment_steps"]
+                )
+            elif rec["kind"] == "two_cores":
+                rec["case_steps_run"] = policy_steps_run(
+                    steps_in_order, rec["policy"], devices=2, segment=r["segment_steps"]
+                )
+            else:
+                rec["case_steps_run"] = case_steps_run(steps_in_order, rec["group"])
             rec["idle"] = rec["case_steps_run"] / int(alone_steps.sum())
             rec["per_step_gain"] = (alone["wall_s"] / int(alone_steps.sum())) / (
                 rec["wall_s"] / rec["case_steps_run"]
@@ -420,8 +645,9 @@ def _title(solver) -> str:
 
 
 def _best(runs) -> tuple[str, dict]:
-    """The batch policy (in the given case order) with the largest speed-up, wall and CPU."""
-    given = {k: v for k, v in runs.items() if v["kind"] == "given"}
+    """The batch policy on one core (in the given case order) with the largest speed-up,
+    wall and CPU."""
+    given = {k: v for k, v in runs.items() if v["kind"] in ("given", "lanes")}
     label = max(given, key=lambda k: min(given[k]["speedup"], given[k]["cpu_speedup"]))
     return label, given[label]
 
@@ -436,6 +662,8 @@ def _solver_table(r, runs) -> str:
         each = rec["speedups"]
         spread = f"{min(each):.2f}–{max(each):.2f}" if len(each) > 1 else f"{each[0]:.2f}"
         name = label + (" (oracle order)" if rec["kind"] == "sorted" else "")
+        if rec["kind"] == "two_cores":
+            name += " (wall: 2 cores vs 1)"
         speedup = (
             "1"
             if rec["kind"] == "alone"
@@ -548,9 +776,10 @@ def _solver_comparison(r) -> str:
     return (
         "\n## Across solvers (same run)\n\nThe accuracy of the solvers differs at the same "
         "tolerance (docs/performance.md), so this compares costs, not cost at equal accuracy. "
-        "Speed-ups against one simulation alone with the default solver (CPU time in brackets):"
-        "\n\n| solver | one simulation alone [s] | alone vs default alone | best batch "
-        "policy | per case [s] | best batch vs default alone |\n|---|---|---|---|---|---|\n"
+        "Speed-ups against one simulation alone with generalized-α, modified Newton (CPU time in "
+        "brackets):"
+        "\n\n| solver | one simulation alone [s] | alone vs generalized-α alone | best batch "
+        "policy | per case [s] | best batch vs generalized-α alone |\n|---|---|---|---|---|---|\n"
         + "\n".join(rows)
         + "\n"
     )
@@ -596,7 +825,12 @@ def _density(r) -> str:
 
 def _why_summary(r) -> str:
     """Speed-up = per-step gain / idle, with the ranges this run measured."""
-    batches = [rec for runs in r["runs"].values() for rec in runs.values() if "idle" in rec]
+    batches = [
+        rec
+        for runs in r["runs"].values()
+        for rec in runs.values()
+        if "idle" in rec and rec["kind"] != "two_cores"
+    ]
     gains = [rec["per_step_gain"] for rec in batches]
     idles = [rec["idle"] for rec in batches]
     return (
@@ -630,6 +864,42 @@ def _cores_text(r) -> str:
         "ratios of this benchmark's unpinned runs were larger and followed the machine's load. "
         "Pinned, a ratio is the cost on the same core(s); for throughput on several cores, "
         "run one pinned process per core."
+    )
+
+
+def _control_text(control) -> str:
+    return ", ".join(
+        f"{k} {val:g}" if isinstance(val, int | float) else f"{k} {val}"
+        for k, val in control.items()
+    )
+
+
+def _two_cores_text(r) -> str:
+    """The two-core rows' verdicts: throughput on this CPU (wall) and cost per core (CPU)."""
+    lines = []
+    for solver, runs in r["runs"].items():
+        for label, rec in runs.items():
+            if rec["kind"] != "two_cores":
+                continue
+            met = "meets" if rec["speedup"] >= 2 else "does not meet"
+            lines.append(
+                f"* {_title(solver)}, `{label[len('2 cores: ') :]}` on each of 2 devices: "
+                f"**{rec['speedup']:.2f}×** the throughput of one simulation at a time on one "
+                f"core (wall time; this {met} the 2× target on the whole CPU), "
+                f"{rec['cpu_speedup']:.2f}× in CPU time (cost per core-second: the per-core "
+                "comparison)."
+            )
+    if not lines:
+        return ""
+    return (
+        "\n## Both cores\n\nThe batch sharded over 2 forced host devices "
+        "(`XLA_FLAGS=--xla_force_host_platform_device_count=2`, as `jaxdeploy sweep` runs), "
+        "each device running the policy on its half of the cases, in a child process pinned "
+        "to both cores, timed in turn with the rows above (`--two-cores`). Its wall-time "
+        "ratio to the one-core `alone` run compares two cores with one, so it is the "
+        "throughput this CPU gains, not a cost per simulation; its CPU-time ratio is the "
+        "cost per core-second (it includes the second core's share, and whatever other "
+        "users took from it stretches the wall time only).\n\n" + "\n".join(lines) + "\n"
     )
 
 
@@ -675,7 +945,7 @@ simulation, on this CPU. The honest comparison is against **the same solver run 
 batch policy that also changes the solver mixes the solver's gain into the batch's.
 
 **What is run.** Scene `{r["scene"]}`, t = 0 to {r["t_end"] * 1e3:g} ms with its default step
-control ({", ".join(f"{k} {val:g}" for k, val in r["control"].items())}), {r["batch"]} cases
+control ({_control_text(r["control"])}), {r["batch"]} cases
 varying {", ".join(r["varied"])} by a log-normal spread s = {r["spread"]} around the defaults
 (seed {r["seed"]}). This window is the start of the deployment (which locks at ≈ 0.54 s):
 the panels leave rest half deployed with the journals centred in their bearings, so it holds
@@ -698,12 +968,15 @@ time per step alone over time per case-step in the batch. *Policies*: `vmap all`
 over all cases; `groups of G`, vmapped groups of G consecutive cases run one after another in
 one compiled program (`batch_function(group_size=G)`, `jax.lax.map(batch_size=G)`);
 *oracle order*: the same groups over the cases sorted by their step count alone, which no
-one knows before running them, so it is the bound on what any ordering can gain.
+one knows before running them, so it is the bound on what any ordering can gain; `L lanes,
+refilled`: L vmapped lanes, a lane that finishes its case taking the next one after at most
+{r.get("segment_steps", 8)} steps (`batch_function(lanes=L)`, `jaxdeploy.lanes`), idle
+counted by replaying that schedule from the per-case step counts; `2 cores`: see below.
 
 ## Results
 
 {chr(10).join(sections)}
-{_solver_comparison(r)}
+{_two_cores_text(r)}{_solver_comparison(r)}
 ## Why
 
 {_why_summary(r)}
