@@ -197,18 +197,24 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
         inner_term = self._inner_term(terms)
         h = t1 - t0
         memory = mech.memory_for_step(y0.memory, y0.q, y0.v)
-        # The inner solver's first-same-as-last value was computed with the previous step's
-        # memory and before projection: always re-evaluate the first stage.
         (q1_inner, v1_inner), err, inner_dense, inner_state, result = self.solver.step(
-            inner_term, t0, t1, (y0.q, y0.v), memory, solver_state.inner, True
+            inner_term, t0, t1, (y0.q, y0.v), memory, solver_state.inner, made_jump
         )
         q1, v1 = q1_inner, v1_inner
         if self.project:
             q1, v1 = project_onto_constraints(mech, q1, v1, t1)
-        qdd1, lam1 = stabilised_accelerations(
-            mech, q1, v1, t1, memory, self.baumgarte, self.linear_solve
-        )
         memory1 = mech.memory_after_step(memory, q1, v1, h)
+        # The accelerations at the step's end with the memory the next step will use
+        # (`memory_for_step` is what the next step computes first): they are the output at t1
+        # and, for a first-same-as-last method (Tsit5, Kvaerno5), the next step's first
+        # stage. The inner solver's own last stage cannot serve: it was taken before the
+        # projection and with this step's memory.
+        memory_next = mech.memory_for_step(memory1, q1, v1)
+        qdd1, lam1 = stabilised_accelerations(
+            mech, q1, v1, t1, memory_next, self.baumgarte, self.linear_solve
+        )
+        if _is_first_same_as_last(inner_state):
+            inner_state = (jnp.zeros_like(inner_state[0]), (v1, qdd1))
         y1 = MechanismState(q1, v1, qdd1, lam1, memory1)
 
         if err is None:
@@ -225,6 +231,12 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
             y0=y0, y1=y1, inner=inner_dense, correction=(q1 - q1_inner, v1 - v1_inner)
         )
         return y1, y_error, dense_info, MechanismODEState(inner_state), result
+
+
+def _is_first_same_as_last(inner_state) -> bool:
+    """Whether a diffrax Runge–Kutta solver state carries a first-same-as-last value: the pair
+    `(first_step, f0)` (`diffrax/_solver/runge_kutta.py`, `_SolverState`; `None` otherwise)."""
+    return isinstance(inner_state, tuple) and len(inner_state) == 2
 
 
 def state_norm(y) -> jax.Array:
