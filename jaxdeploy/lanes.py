@@ -17,7 +17,10 @@ segment (`SaveAt(solver_state=True, made_jump=True)`); the step-size controller 
 (`_Resume`) so that the resumed solve starts with exactly the step the previous segment had
 proposed, with the controller's own state (diffrax's `dt0` would start it at `t + (t_next - t)`,
 which differs from `t_next` in the last bit). The proposal is what diffrax computes after a
-step: the controller's, clipped to the end time (`_clip_to_end`, copied from diffrax's loop).
+step: the controller's, clipped to the end time by diffrax's own rule (its private
+`_clip_to_end`, imported rather than rewritten: a resumed segment must start exactly where the
+uninterrupted loop would continue, so it must follow that rule in whatever diffrax is installed;
+tests/test_lanes.py checks the result bit for bit).
 Saved states come from each segment's `SaveAt(ts=...)`, with the times before the segment's
 start clipped to it (diffrax wants them inside [t0, t1]); those entries were saved by an
 earlier segment and are kept. A new case starts with the same step size, controller state and
@@ -53,6 +56,7 @@ import equinox as eqx
 import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
+from diffrax._integrate import _clip_to_end
 
 from .simulation import Trajectory, _integrate, _saved, _setup, solver_stats
 from .solvers import MechanismState, MechanismTerm
@@ -94,14 +98,6 @@ def check_lane_options(options: Mapping) -> None:
             f"lanes: option(s) {', '.join(unknown)} are not supported with lane refilling "
             f"(supported: {', '.join(LANE_OPTIONS)}); run without lanes (e.g. group_size)"
         )
-
-
-def _clip_to_end(tprev, tnext, t1, t1_clip_floor, keep_step):
-    """diffrax's end-of-step clipping of the next step's end (diffrax/_integrate.py, copied:
-    a resumed segment must start exactly where the uninterrupted loop would continue)."""
-    clip = tnext > t1_clip_floor
-    tclip = jnp.where(keep_step, t1, tprev + 0.5 * (t1 - tprev))
-    return jnp.where(clip, tclip, tnext)
 
 
 def _clip_floor(t1):
