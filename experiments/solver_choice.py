@@ -130,6 +130,7 @@ def measure(repeats):
         "default_solver": scene.default_control.get("solver", "generalized_alpha"),
         "repeats": repeats,
         "machine": machine_description(),
+        "cores": len(os.sched_getaffinity(0)),
         "versions": run_metadata(),
     }
 
@@ -188,8 +189,9 @@ def write_doc(result):
     text = f"""# deploy_array: which solver by default (generated)
 
 *Written by `PYTHONPATH=. python experiments/solver_choice.py --repeats {result["repeats"]}`;
-rerun it to regenerate. {where}, load {load:.1f}; a shared machine, so only the ratios of
-timings taken side by side (interleaved, one process) are meaningful.*
+rerun it to regenerate. {where}, load {load:.1f}, the process allowed on
+{result.get("cores", "?")} core(s) (e.g. `taskset -c 0`); a shared machine, so only the ratios
+of timings taken side by side (interleaved, one process) are meaningful.*
 
 The default run (deploy_array, {result["t_end"]:g} s, {control}, {N_SAVE} saved states) with
 each solver. The physics rows come from the run's summary (`jaxdeploy simulate`'s numbers);
@@ -219,8 +221,9 @@ steps are {gen["steps"] / tsit5["steps"]:.1f}× longer, and it still balances
 **Why an explicit method wins on this scene.** Generalized-α is second order and was chosen for
 stiffness, but the contact stiffness never limits an explicit step here: the steps are limited
 by accuracy through the impacts anyway, and between impacts the mechanism is smooth and slow,
-where a fifth-order method takes long steps. Per step Tsit5 costs six evaluations of the
-index-1 accelerations and a projection, generalized-α a Newton solve (a factorisation whenever
+where a fifth-order method takes long steps. Per step Tsit5 costs seven evaluations of the
+index-1 accelerations (six stages, and one at the projected step end that is also the next
+step's first stage) and a projection, generalized-α a Newton solve (a factorisation whenever
 the iteration matrix is refreshed); Tsit5 takes far fewer steps, and that decides.
 
 The scene's default solver is `{result["default_solver"]}` (`DeployArray.default_control`).{pending}
