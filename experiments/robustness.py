@@ -310,11 +310,21 @@ def directional_derivative(scene, params, t_end, control, outputs, n_save):
     start = time.perf_counter()
     _, tangent = jax.jvp(f, (jnp.zeros(()),), (jnp.ones(()),))
     tangent = np.asarray(tangent)
-    return {
-        "gradient_finite": bool(np.all(np.isfinite(tangent))),
-        "gradient_max_abs": float(np.max(np.abs(tangent))),
+    finite = np.isfinite(tangent)
+    record = {
+        "gradient_finite": bool(np.all(finite)),
+        "gradient_max_abs": float(np.max(np.abs(tangent[finite]), initial=0.0)),
         "gradient_wall_s": time.perf_counter() - start,
     }
+    if not record["gradient_finite"] and tangent.shape[:1] == (n_save,):
+        # A time series (deploy: the angle at the saved times): from when on it is not
+        # finite, and how large it had grown by then (a derivative that explodes in chaotic
+        # rattle overflows somewhere; a singular formula gives NaN at once, at any size).
+        bad = int(np.argmax(~np.all(finite.reshape(n_save, -1), axis=1)))
+        record["gradient_nonfinite_from_s"] = float(t_end * bad / (n_save - 1))
+        before = np.abs(tangent[:bad])
+        record["gradient_max_abs_before"] = float(np.max(before, initial=0.0))
+    return record
 
 
 # --- why an impact case misses the tighter-tolerance check ------------------------------------
@@ -589,10 +599,59 @@ def _table(records, names=()):
             + " | "
             f"{_fmt(r.get('ref_difference_rel'), '.1e')} | "
             f"{_fmt(r.get('ref_dissipated_difference_rel'), '.1e')} | "
-            f"{_fmt(r.get('gradient_finite'))} | "
+            f"{_derivative_cell(r)} | "
             f"{other_txt} | {_fmt(r.get('wall_s'), '.0f')} |"
         )
     return head + "\n".join(rows) + "\n"
+
+
+def _derivative_cell(r) -> str:
+    """'yes (max |d/ds|)', or where it stopped being finite and how large it had grown."""
+    if "gradient_finite" not in r:
+        return "—"
+    if r["gradient_finite"]:
+        return f"yes ({r['gradient_max_abs']:.0e})" if "gradient_max_abs" in r else "yes"
+    if "gradient_nonfinite_from_s" in r:
+        return (
+            f"**NO** from {r['gradient_nonfinite_from_s']:.3f} s "
+            f"({r['gradient_max_abs_before']:.0e} before)"
+        )
+    return _fmt(False)
+
+
+def _deploy_derivative_finding(deploy) -> str:
+    """Rows whose directional derivative is not finite over the whole run: when it stopped
+    being finite and how large it (and the other rows') had grown."""
+    rows = {
+        k: r
+        for k, r in deploy.items()
+        if not k.startswith("_") and r.get("gradient_finite") is False
+    }
+    if not rows:
+        return ""
+    finite = [r["gradient_max_abs"] for r in deploy.values() if r.get("gradient_finite")]
+    where = "; ".join(
+        f"{k} from {r['gradient_nonfinite_from_s']:.3f} s, having grown to "
+        f"{r['gradient_max_abs_before']:.0e}"
+        for k, r in rows.items()
+        if "gradient_nonfinite_from_s" in r
+    )
+    checked, _ = _solver_pair(deploy)
+    return (
+        f"* **deploy_array derivatives over the post-lock rattle.** With {checked} the "
+        f"directional derivative of the deployment angle (per 100 % change of every parameter "
+        f"at once, rad) is not finite in {'; '.join(rows)}: {where}. It is finite through the "
+        f"unfolding and the lock (≈ 0.54 s) and grows exponentially after it, in every row: the "
+        f"finite rows reach {min(finite):.0e} to {max(finite):.0e} by {DEPLOY_T_END:g} s. The "
+        "rattle of the journals in their clearances after the lock is chaotic "
+        '(docs/identification.md, "Replayed derivatives over the horizon": derivatives stop '
+        "describing the model there); "
+        "generalized-α's numerical dissipation slows the growth, an explicit Runge–Kutta method "
+        "has none, and once the tangent is that large some intermediate overflows. A singular "
+        "formula would give NaN from its first use, at any size: the tangent of single steps "
+        "started at those states with zero incoming tangent is finite. For design over the "
+        "post-lock phase use the smoothed objectives (docs/design.md), not these derivatives.\n"
+    )
 
 
 def _solvers_agree(d):
@@ -1027,7 +1086,8 @@ where the steps fall).
   bearing": net elastic force smooth and zero at e = 0, stiffness 2 F_e'(−c); identical to the
   single-point joint wherever the far side is inactive, so the Hertz and c ≫ σ rows are
   unchanged). Every row above was run with it.
-{_deploy_energy_finding(deploy, diag)}{_deploy_dissipation_finding(deploy)}{_deploy_cost(deploy)}
+{_deploy_energy_finding(deploy, diag)}{_deploy_dissipation_finding(deploy)}\
+{_deploy_derivative_finding(deploy)}{_deploy_cost(deploy)}
 * **Latch engagement** adds energy J = ½ k_L (α − α_L)² at the step after α crosses α_L (the
   overshoot is bounded by one step); it is booked as energy put in, not as an error.
 
