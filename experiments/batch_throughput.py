@@ -620,8 +620,10 @@ def derive(r) -> None:
             rec["per_step_gain"] = (alone["wall_s"] / int(alone_steps.sum())) / (
                 rec["wall_s"] / rec["case_steps_run"]
             )
-        if DEFAULT_SOLVER in r["runs"]:
-            base = r["runs"][DEFAULT_SOLVER]["alone"]
+    # Against generalized-α alone: only once every solver's medians exist (it may come later).
+    if DEFAULT_SOLVER in r["runs"]:
+        base = r["runs"][DEFAULT_SOLVER]["alone"]
+        for runs in r["runs"].values():
             for rec in runs.values():
                 rec["speedup_vs_default_alone"] = base["wall_s"] / rec["wall_s"]
                 rec["cpu_speedup_vs_default_alone"] = base["cpu_s"] / rec["cpu_s"]
