@@ -641,8 +641,9 @@ def _deploy_derivative_finding(deploy) -> str:
         f"* **deploy_array derivatives over the post-lock rattle.** With {checked} the "
         f"directional derivative of the deployment angle (per 100 % change of every parameter "
         f"at once, rad) is not finite in {'; '.join(rows)}: {where}. It is finite through the "
-        f"unfolding and the lock (≈ 0.54 s) and grows exponentially after it, in every row: the "
-        f"finite rows reach {min(finite):.0e} to {max(finite):.0e} by {DEPLOY_T_END:g} s. The "
+        f"unfolding and the lock (≈ 0.54 s); after it, where the journals rattle, it grows "
+        f"exponentially: the finite rows reach {min(finite):.0e} to {max(finite):.0e} by "
+        f"{DEPLOY_T_END:g} s. The "
         "rattle of the journals in their clearances after the lock is chaotic "
         '(docs/identification.md, "Replayed derivatives over the horizon": derivatives stop '
         "describing the model there); "
@@ -959,6 +960,15 @@ def _revision(versions):
     return f"git {git['commit'][:10]}" + (" (uncommitted changes)" if git["dirty"] else "")
 
 
+def _family_revisions(impact, deploy, long) -> str:
+    """The code each family's results were computed with (families are rerun separately)."""
+    parts = []
+    for name, records in (("impact", impact), ("deploy", deploy), ("20 s", long)):
+        versions = records.get("_meta", {}).get("versions", {})
+        parts.append(f"{name} {_revision(versions)}")
+    return ", ".join(parts)
+
+
 def write_docs():
     impact = _load("impact")
     deploy = _load("deploy")
@@ -972,7 +982,8 @@ def write_docs():
 
 Machine: {meta.get("machine", "?")}, {os.cpu_count()} cores (shared; wall times are noisy),
 Python {versions.get("python", "?")}, JAX {versions.get("jax", "?")},
-diffrax {versions.get("diffrax", "?")}, float64, code {_revision(versions)}. Solvers
+diffrax {versions.get("diffrax", "?")}, float64,
+code: {_family_revisions(impact, deploy, long)}. Solvers
 checked, adaptive, each family with its scene's default: impact {_solver_pair(impact)[0]},
 deploy_array {_solver_pair(deploy)[0]}.
 
