@@ -60,6 +60,7 @@ from diffrax._integrate import _clip_to_end
 
 from .simulation import Trajectory, _integrate, _saved, _setup, solver_stats
 from .solvers import MechanismState, MechanismTerm
+from .solvers.wrapped_controller import WrappedController
 
 # The options of `simulate` a lane-refilled batch accepts (the rest concern differentiation or
 # display: `replay_steps`, `adjoint`, `progress`).
@@ -108,7 +109,7 @@ def _clip_floor(t1):
     return floor
 
 
-class _Resume(dfx.AbstractAdaptiveStepSizeController):
+class _Resume(WrappedController):
     """Wraps the run's step-size controller so that a solve starts with a given next step end
     `t_next` and controller state (`init`), and records in its state the raw proposal and the
     keep decision of every step (`adapt_step_size`), from which the next segment's `t_next`
@@ -117,21 +118,6 @@ class _Resume(dfx.AbstractAdaptiveStepSizeController):
     controller: dfx.AbstractAdaptiveStepSizeController
     t_next: jax.Array
     state: object
-
-    @property
-    def rtol(self):
-        return self.controller.rtol
-
-    @property
-    def atol(self):
-        return self.controller.atol
-
-    @property
-    def norm(self):
-        return self.controller.norm
-
-    def wrap(self, direction):
-        return eqx.tree_at(lambda c: c.controller, self, self.controller.wrap(direction))
 
     def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
         return self.t_next, (self.state, self.t_next, jnp.array(True))

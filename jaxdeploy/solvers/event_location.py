@@ -39,9 +39,10 @@ import jax
 import jax.numpy as jnp
 
 from ..mechanism import Mechanism
+from .wrapped_controller import WrappedController
 
 
-class LocateEvents(dfx.AbstractAdaptiveStepSizeController):
+class LocateEvents(WrappedController):
     """Wraps an adaptive step-size controller so that steps end just past the mechanism's
     memory events (module docstring).
 
@@ -60,21 +61,6 @@ class LocateEvents(dfx.AbstractAdaptiveStepSizeController):
     tail: float = eqx.field(static=True, default=1e-2)
     overshoot: float = eqx.field(static=True, default=1e-3)
     dt_min: float | None = None
-
-    @property
-    def rtol(self):
-        return self.controller.rtol
-
-    @property
-    def atol(self):
-        return self.controller.atol
-
-    @property
-    def norm(self):
-        return self.controller.norm
-
-    def wrap(self, direction):
-        return eqx.tree_at(lambda c: c.controller, self, self.controller.wrap(direction))
 
     def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
         return self.controller.init(terms, t0, t1, y0, dt0, args, func, error_order)
