@@ -812,8 +812,10 @@ def _parts_reading(parts) -> str:
         )
     if "ode_alone" in parts:
         text.append(
-            "A Tsit5 step is six evaluations of the index-1 accelerations (each a constrained "
-            f"linear solve; {ratios[('ode_', 'accelerations q̈(q, q̇)')]:.2f}) and one "
+            "A Tsit5 step is seven evaluations of the index-1 accelerations (six stages and "
+            "one at the projected step end, which is also the next step's first stage; each a "
+            "constrained linear solve, "
+            f"{ratios[('ode_', 'accelerations q̈(q, q̇)')]:.2f}) and one "
             f"projection onto the constraints ({ratios[('ode_', 'projection')]:.2f})."
         )
     return " ".join(text)
