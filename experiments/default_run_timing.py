@@ -122,7 +122,11 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    return f"{cpu}, {os.cpu_count()} logical cores, Python {platform.python_version()}"
+    allowed = len(os.sched_getaffinity(0))
+    return (
+        f"{cpu}, {os.cpu_count()} logical cores (this run allowed on {allowed}), "
+        f"Python {platform.python_version()}"
+    )
 
 
 def main() -> int:
