@@ -58,7 +58,7 @@ import jax
 import jax.numpy as jnp
 from diffrax._integrate import _clip_to_end
 
-from .simulation import Trajectory, _integrate, _saved, _setup, solver_stats
+from .simulation import Trajectory, _integrate, _saved, _setup, simulate, solver_stats
 from .solvers import MechanismState, MechanismTerm
 from .solvers.wrapped_controller import WrappedController
 
@@ -185,24 +185,10 @@ def simulate_in_lanes(
 
     probe = setup(*prepare(take(items, 0)))
     if not isinstance(probe.controller, dfx.AbstractAdaptiveStepSizeController):
-        # Fixed steps: every case takes the same steps, nothing idles; vmapped groups.
+        # Fixed steps: every case takes the same steps, nothing idles; vmapped groups of
+        # plain `simulate` runs.
         def fixed(item):
-            mechanism, initial = prepare(item)
-            run = setup(mechanism, initial)
-            sol = _integrate(
-                mechanism,
-                run.y0,
-                run.t0,
-                run.t_end,
-                run.dt0,
-                run.solver,
-                run.controller,
-                run.max_steps,
-                saveat=dfx.SaveAt(ts=run.ts, solver_state=True),
-                adjoint=run.adjoint,
-            )
-            stats = solver_stats(sol.stats, sol.solver_state)
-            return Trajectory(sol.ts, *_saved(sol.ys), sol.result, stats)
+            return simulate(*prepare(item), t_end, ts=ts, **options)
 
         return jax.lax.map(fixed, items, batch_size=lanes)
 
