@@ -154,8 +154,11 @@ def batch_function(
     """
     check_policy(group_size, lanes, segment_steps)
 
+    def params_of(varied_values):
+        return {**shared, **dict(zip(varied, varied_values, strict=True))}
+
     def one(varied_values):
-        params = {**shared, **dict(zip(varied, varied_values, strict=True))}
+        params = params_of(varied_values)
         trajectory = run_scene(scene, params, t_end, ts=ts, control=control, **simulate_options)
         return trajectory if evaluate is None else (trajectory, evaluate(params, trajectory))
 
@@ -164,7 +167,7 @@ def batch_function(
         check_lane_options(options)
 
         def prepare(varied_values):
-            params = {**shared, **dict(zip(varied, varied_values, strict=True))}
+            params = params_of(varied_values)
             mechanism = scene.build(params)
             return mechanism, scene.initial_state(params, mechanism)
 
@@ -182,7 +185,7 @@ def batch_function(
                 return trajectory
 
             def features(varied_values, case):
-                return evaluate({**shared, **dict(zip(varied, varied_values, strict=True))}, case)
+                return evaluate(params_of(varied_values), case)
 
             return trajectory, jax.vmap(features)(values, trajectory)
 
