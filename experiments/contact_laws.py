@@ -162,7 +162,7 @@ def restitution_table(stiffness, mass=0.2, v0=0.1):
     header = (
         "Effective restitution (rebound speed / approach speed) of each damped law with the\n"
         f"Hertz law (K = {float(stiffness):.3e} N/m^1.5, m = {mass} kg, v⁻ = {v0} m/s); by the\n"
-        "scaling argument of LITERATURE §1.4 it depends on χ(c_e) only. Written by\n"
+        "scaling argument of docs/restitution.md it depends on χ(c_e) only. Written by\n"
         "experiments/contact_laws.py.\n\n"
     )
     (OUT / "contact_restitution.md").write_text(header + "\n".join(lines) + "\n")

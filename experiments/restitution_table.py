@@ -4,8 +4,8 @@ For every restitution-calibrated law (Hunt–Crossley, Lankarani–Nikravesh, Fl
 Hu–Guo) on the Hertz elastic law (σ = 0), the Impact scene is run for nominal c_e in
 {0.1, …, 0.9, 0.95, 0.99}; the effective restitution is the rebound speed over the approach
 speed. Checks: (i) an independent scipy DOP853 solve of the dimensionless impact
-x'' = −x^1.5 max(0, 1 + χ x') (LITERATURE §1.4), (ii) step-control convergence (tolerances and
-dt_max halved), (iii) independence of m, K and v0 (the scaling fact). Writes
+x'' = −x^1.5 max(0, 1 + χ x') (the impact made dimensionless), (ii) step-control convergence
+(tolerances and dt_max halved), (iii) independence of m, K and v0 (the scaling fact). Writes
 `docs/restitution.md` and `docs/figures/restitution.png`; every number there is computed here.
 
 Usage: `.venv/bin/python experiments/restitution_table.py` (a few minutes on 2 cores).
@@ -41,7 +41,7 @@ LABELS = {
     "gonthier": "Gonthier 2004",
     "hu_guo": "Hu–Guo 2015",
 }
-CHI = {  # χ(c_e) as documented in DESIGN §2.3 (used only by the independent ODE reference)
+CHI = {  # χ(c_e) as tabulated in docs/contact.md (used only by the independent ODE reference)
     "hunt_crossley": lambda e: 1.5 * (1 - e),
     "lankarani_nikravesh": lambda e: 0.75 * (1 - e**2),
     "flores": lambda e: 1.6 * (1 - e) / e,
@@ -259,7 +259,8 @@ def main():
         "script.*",
         "",
         "Each restitution-calibrated law `F_N = max(0, K δ^1.5 (1 + χ(c_e) δ'/v⁻))` "
-        "(DESIGN §2.3, LITERATURE §1.4; Hertz elastic law, σ = 0) is run in the Impact scene: "
+        "(χ per law as tabulated in docs/contact.md; Hertz elastic law, σ = 0) "
+        "is run in the Impact scene: "
         "a free journal (m = 1 kg) crosses the clearance at v0 = 1 m/s and hits a fixed "
         "bearing (K = 1e10 N/m^1.5, Hertz contact duration t_c = 3.22e-4 s). The effective "
         "restitution is e_eff = −v_x(after)/v0, read at the first saved point after the "
@@ -272,8 +273,8 @@ def main():
         "that e_eff equals c_e. Lankarani–Nikravesh assumes small dissipation and is only "
         "valid near c_e = 1 (it loses far too little energy at small c_e); Flores 2011 and "
         "Gonthier 2004 were built to hold over the whole range; Flores' χ diverges as "
-        "c_e → 0. Hu–Guo is implemented in DESIGN's form 3(1−c_e)/(2c_e), which is "
-        "**unverified** against the paper (LITERATURE §1.4).",
+        "c_e → 0. Hu–Guo is implemented in the recalled form 3(1−c_e)/(2c_e), which is "
+        "**unverified** against the paper (docs/contact.md).",
         "",
         "## Effective restitution",
         "",
@@ -296,10 +297,11 @@ def main():
         "",
         "## Checks",
         "",
-        "**Independent reference.** By the scaling fact (LITERATURE §1.4), with "
+        "**Independent reference.** By scaling the equation of motion, with "
         "δ* = (m v0²/K)^(2/5) and T = δ*/v0 the impact obeys x'' = −x^1.5 max(0, 1 + χ x'), "
         "x(0) = 0, x'(0) = 1, so e_eff depends on χ only. This ODE, solved by scipy DOP853 "
-        "(rtol 1e-12) with the χ(c_e) of DESIGN §2.3, gives e_eff independently of jaxdeploy; "
+        "(rtol 1e-12) with the χ(c_e) of the table in docs/contact.md, "
+        "gives e_eff independently of jaxdeploy; "
         "largest difference over the 11 c_e values per law:",
         "",
         table(

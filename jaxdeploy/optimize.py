@@ -18,7 +18,7 @@ objective optimised is the Gaussian-smoothed (or tolerance-averaged) J, whose gr
 estimated by Stein's identity (`Scatter.estimate`); `optimize` also takes pathwise gradients
 for smooth problems.
 
-Bounds by reparametrisation (DESIGN.md §5): every parameter x_i ∈ [l_i, u_i] is a smooth
+Bounds by reparametrisation: every parameter x_i ∈ [l_i, u_i] is a smooth
 function of an unconstrained u_i,
 
     x_i = exp(ln l_i + (ln u_i − ln l_i) σ(u_i))   (l_i > 0: uniform in ln x, for Ra and c)

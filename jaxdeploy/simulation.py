@@ -60,7 +60,7 @@ class StepControl:
         def data(x):
             return None if x is None else jnp.asarray(x, dtype=float)
 
-        # PI coefficients suited to stiff problems (diffrax docs; LITERATURE §3.4).
+        # PI coefficients suited to stiff problems (diffrax's `PIDController` docstring).
         return dfx.PIDController(
             rtol=data(1e-6 if self.rtol is None else self.rtol),
             atol=data(1e-9 if self.atol is None else self.atol),

@@ -98,7 +98,8 @@ def _effective_restitution(law, v0=0.5, mass=0.5):
 
 
 def _dimensionless_restitution(chi, n=1.5):
-    """Independent reference: x'' = −x^n (1 + χ x'), x(0) = 0, x'(0) = 1 (LITERATURE §1.4)."""
+    """Independent reference: x'' = −x^n (1 + χ x'), x(0) = 0, x'(0) = 1: F = K δ^n (1 + χ δ'/v⁻)
+    in units δ* = (m v⁻²/K)^(1/(n+1)), T = δ*/v⁻ (docs/restitution.md)."""
 
     def rhs(_, y):
         return [y[1], -(max(y[0], 0.0) ** n) * max(1.0 + chi * y[1], 0.0)]

@@ -54,7 +54,8 @@ def test_accurate_beyond_tabulated_range(n):
 
 
 def test_literature_values_of_f_three_halves():
-    # LITERATURE §1.6 table (5 significant digits).
+    # F_3/2 to 5 significant digits, computed with mpmath both from the definition (quad) and
+    # from Γ(n+1)/√(2π) exp(−h²/4) D_(−n−1)(h) (mpmath.pcfd); the two agree to 8 digits.
     hs = jnp.array([-1.0, 0.0, 1.0, 2.0, 3.0, 4.0, -10.0])
     table = np.array([1.40460, 0.43002, 7.5668e-2, 6.6482e-3, 2.6397e-4, 4.4392e-6, 31.7416])
     np.testing.assert_allclose(gaussian_moment(hs, 1.5), table, rtol=5e-5)

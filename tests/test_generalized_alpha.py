@@ -17,7 +17,7 @@ from jaxdeploy.solvers import GeneralizedAlpha, MechanismState, MechanismTerm, c
 @pytest.mark.parametrize(
     "rho, expected",
     [
-        # Arnold–Brüls convention (old level weighted), LITERATURE §2.1 table.
+        # Chung & Hulbert (1993) formulas in the Arnold–Brüls convention (old level weighted).
         (0.8, (1 / 3, 4 / 9, 11 / 18, 0.25 * (11 / 18 + 0.5) ** 2)),
         (0.5, (0.0, 1 / 3, 5 / 6, 4 / 9)),
         (1.0, (0.5, 0.5, 0.5, 0.25)),

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-BAUMGARTE = 5.0  # α = β = 5 s⁻¹ as used by Flores & Ambrósio (2004) [recalled]
+BAUMGARTE = 5.0  # α = β = 5 s⁻¹ as used by Flores & Ambrósio (2004) (recalled, unverified)
 VELOCITY_FLOOR = 1e-4  # m/s, as jaxdeploy.contact.damping (the same model)
 
 

@@ -1,4 +1,4 @@
-"""Contact laws for revolute clearance joints with rough surfaces (DESIGN §2.3–2.5).
+"""Contact laws for revolute clearance joints with rough surfaces.
 
 Pure JAX, float64, jit/vmap/grad-safe. Laws are small `eqx.Module`s (numbers are array leaves,
 exponents and shapes are static), so a scene composes exactly the laws it uses. See

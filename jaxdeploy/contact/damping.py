@@ -1,6 +1,6 @@
 """Damped normal-force laws `F_N(δ, δ', v⁻)` built on an elastic law `F_e(δ)`.
 
-Restitution-calibrated family (DESIGN §2.3, LITERATURE §1.4):
+Restitution-calibrated family (Lankarani & Nikravesh 1990, eq. for F_N; docs/contact.md):
 
     F_N = max(0, F_e(δ) · (1 + χ(c_e) δ' / v⁻))
 
@@ -77,7 +77,7 @@ class AbstractRestitutionLaw(AbstractNormalLaw):
     """`F_N = max(0, F_e(δ) (1 + χ(c_e) δ'/v⁻))`; subclasses give the hysteresis factor χ.
 
     **References:** Hunt, Crossley, *J. Appl. Mech.* 42 (1975) 440; Lankarani, Nikravesh,
-    *J. Mech. Des.* 112 (1990) 369; DESIGN.md §2.3; LITERATURE.md §1.4.
+    *J. Mech. Des.* 112 (1990) 369; χ forms as collected in docs/contact.md.
     """
 
     restitution: eqx.AbstractVar[Array]
@@ -107,7 +107,7 @@ class HuntCrossley(AbstractRestitutionLaw):
     **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1].
 
     **References:** Hunt, Crossley, *J. Appl. Mech.* 42 (1975) 440, in the form used by MBS
-    reviews (LITERATURE §1.4, [2nd]).
+    reviews (second-hand: not checked in the 1975 paper).
     """
 
     elastic: AbstractElasticLaw
@@ -153,7 +153,7 @@ class Gonthier(AbstractRestitutionLaw):
     **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1].
 
     **References:** Gonthier, McPhee, Lange, Piedbœuf, *Multibody Syst. Dyn.* 11 (2004) 209
-    [recalled]; LITERATURE §1.4.
+    (recalled, unverified).
     """
 
     elastic: AbstractElasticLaw
@@ -166,9 +166,10 @@ class Gonthier(AbstractRestitutionLaw):
 class HuGuo(AbstractRestitutionLaw):
     """Hu–Guo (2015): `χ = 3(1 − c_e)/(2 c_e)` — **UNVERIFIED** against the paper.
 
-    The paper's text was not available to us. DESIGN.md gives `3(1 − c_e)/(2 c_e)`; the DyS code
+    The paper's text was not available to us. `3(1 − c_e)/(2 c_e)` is the form recalled from
+    the literature (recalled, unverified); the DyS code
     (ladisk/DyS `contact_model.py`) implements `(3/2)(1 − c_e)/(2 c_e) = 3(1 − c_e)/(4 c_e)`.
-    We keep DESIGN's form: only it has the small-loss limit `χ → 3(1 − c_e)/2` shared by
+    We keep the recalled form: only it has the small-loss limit `χ → 3(1 − c_e)/2` shared by
     Hunt–Crossley, Lankarani–Nikravesh and Flores (the DyS form halves it). See docs/contact.md.
 
     **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1].
@@ -193,7 +194,7 @@ class HuntCrossleyMaterial(AbstractNormalLaw):
     **Arguments:** `elastic` (elastic law), `alpha` α ≥ 0 (s/m).
 
     **References:** Hunt, Crossley (1975); Marhefka, Orin, *IEEE Trans. SMC A* 29 (1999) 566
-    [2nd]; LITERATURE.md §1.4.
+    (second-hand).
     """
 
     elastic: AbstractElasticLaw

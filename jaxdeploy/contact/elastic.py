@@ -70,8 +70,8 @@ class HertzElastic(AbstractElasticLaw):
 
     The power is guarded so that the gradient at δ = 0 is finite (0 for n > 1).
 
-    **References:** Hertz (1882); Lankarani & Nikravesh, *J. Mech. Des.* 112 (1990) 369;
-    DESIGN.md §2.3.
+    **References:** Hertz (1882); Johnson, *Contact Mechanics* (1985); Lankarani & Nikravesh,
+    *J. Mech. Des.* 112 (1990) 369.
     """
 
     stiffness_coefficient: Array
@@ -123,13 +123,14 @@ class RoughElastic(AbstractElasticLaw):
     `k_d = dF_e/dδ = K n σ^(n−1) F_(n−1)(s0 − δ/σ)`.
 
     Caveat: elastic asperities are an idealisation — for machined steel the plasticity index
-    is ≫ 1 (LITERATURE §1.7), so this is a smooth, differentiable *phenomenological* law.
+    is ≫ 1 (ψ ~ 4–16 with GW's index; docs/contact.md), so this is a smooth, differentiable
+    *phenomenological* law.
 
     **References:**
 
     - Greenwood, Williamson, *Proc. R. Soc. A* 295 (1966) 300.
     - Wang et al., *Actuators* 13 (2024) 274 (W24; states the approach, equations missing).
-    - DESIGN.md §2.3 (this form); LITERATURE.md §1.6, §1.8.
+    - docs/contact.md, "What is reconstructed, and why" (this form is our reconstruction).
     """
 
     stiffness_coefficient: Array

@@ -2,9 +2,9 @@
 
 Every law returns the *signed* friction magnitude along +t: odd in the sliding speed `v_t`
 (m/s) and bounded by `μ_max F_N`. The caller applies it against sliding, i.e. the journal gets
-`−F_T t` (DESIGN §2.2). All laws are smooth enough that gradients are finite at `v_t = 0`:
+`−F_T t` (Flores et al. 2008). All laws are smooth enough that gradients are finite at `v_t = 0`:
 the sign is regularised with an explicit slip velocity, never `tanh(100 v)`-style hidden widths
-(those gave NaN identification gradients; LITERATURE §1.5).
+(those gave NaN identification gradients, https://github.com/isaac-sim/IsaacSim/issues/839).
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def regularized_sign(v, slip_velocity, shape: str = "algebraic"):
     **Returns:** a C^∞, odd function of `v` with values in (−1, 1).
 
     **References:** Pennestrì et al., *Nonlinear Dyn.* 83 (2016) 1785; Marques et al.,
-    *Nonlinear Dyn.* 86 (2016) 1407 [recalled]; LITERATURE.md §1.5.
+    *Nonlinear Dyn.* 86 (2016) 1407 (recalled, unverified).
     """
     v = jnp.asarray(v, dtype=float)
     if shape == "algebraic":
@@ -72,7 +72,8 @@ class SmoothCoulomb(AbstractFrictionLaw):
       regularisation width, and a differentiable hyperparameter.
     - `shape`: static, `"algebraic"` (`v/sqrt(v² + v_s²)`, default) or `"tanh"`.
 
-    **References:** LITERATURE.md §1.5; DESIGN.md §2.4.
+    **References:** Pennestrì et al., *Nonlinear Dyn.* 83 (2016) 1785; Marques et al.,
+    *Nonlinear Dyn.* 86 (2016) 1407 (recalled, unverified); docs/contact.md.
     """
 
     mu: Array = eqx.field(converter=_float_array)
@@ -98,8 +99,8 @@ class AmbrosioCoulomb(AbstractFrictionLaw):
 
     The dynamic correction acts on the *speed* `|v_t|`: the DyS code applies it to the signed
     `v_t`, which gives `c_d = 0` for all negative `v_t` (friction only in one direction) — a
-    bug we do not copy (LITERATURE §1.5). Since `c_d = 0` near `v_t = 0`, the sign's jump is
-    never seen and the gradient at `v_t = 0` is 0.
+    bug we do not copy (ladisk/DyS `friction_model.py`). Since `c_d = 0` near `v_t = 0`, the
+    sign's jump is never seen and the gradient at `v_t = 0` is 0.
 
     **Arguments:**
 
@@ -107,8 +108,8 @@ class AmbrosioCoulomb(AbstractFrictionLaw):
     - `v0`, `v1`: tolerance velocities (m/s), `0 ≤ v0 < v1`; defaults 1e-4, 1e-3.
     - `transition`: static, `"linear"` (the published law, default) or `"smoothstep"`.
 
-    **References:** Ambrósio, *Virtual Nonlinear Multibody Systems* (2003) [recalled];
-    Flores et al. (2008); LITERATURE.md §1.5.
+    **References:** Ambrósio, *Virtual Nonlinear Multibody Systems* (2003) (recalled, unverified);
+    Flores et al. (2008).
     """
 
     mu: Array = eqx.field(converter=_float_array)
@@ -153,7 +154,7 @@ class StribeckFriction(AbstractFrictionLaw):
 
     `|F_T| ≤ max(μ_s, μ_k) F_N`.
 
-    **References:** Bengisu, Akay; Stribeck (1902) [recalled]; LITERATURE.md §1.5.
+    **References:** Bengisu, Akay; Stribeck (1902) (recalled, unverified).
     """
 
     mu_static: Array = eqx.field(converter=_float_array)

@@ -5,14 +5,15 @@ Two quadratures, each used where it is accurate:
 * `h >= -H_SWITCH` ("shallow"): `F_n(h) = ∫_0^T t^n φ(t + h) dt` with `t = u²`, i.e.
   `∫_0^√T 2 u^(2n+1) φ(u² + h) du`, `T = 12 + max(0, −h)`, 64-node Gauss–Legendre. The
   substitution removes the `t^n` endpoint singularity, so the integrand is analytic and the rule
-  converges to round-off (LITERATURE §1.6; re-checked against mpmath in the tests).
+  converges to round-off (checked against mpmath in the tests; docs/contact.md).
 * `h < -H_SWITCH` ("deep"): every asperity is in contact, `(s − h)^n` has no kink on the support
   of φ, so `F_n(h) = E[(Z − h)^n]` is integrated over `s ∈ [−L, L]` directly. This branch is
   needed because the shallow rule's window grows with `−h` and its nodes stop resolving the
   Gaussian for `h ≪ −10` (deep contact, or σ → 0).
 
 Both branches are smooth, jit/vmap/grad-safe, and each only ever sees arguments in its own range
-(clipped), so no NaN can leak through `jnp.where` into a gradient (LITERATURE §3.8).
+(clipped), so no NaN can leak through `jnp.where` into a gradient (JAX FAQ, "Gradients
+contain NaN where using `where`").
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ def positive_power(base, n: float):
     """`base_+^n`: `base**n` where `base > 0`, else 0, with a finite gradient (0) at `base <= 0`.
 
     A plain `jnp.maximum(base, 0)**n` has an infinite or NaN gradient at 0 for `n < 1`, and
-    `jnp.where` alone would still differentiate the untaken branch (LITERATURE §3.8).
+    `jnp.where` alone would still differentiate the untaken branch (JAX FAQ).
 
     **Arguments:** `base` (array), `n` (static Python number ≥ 0).
 
@@ -70,7 +71,7 @@ def _shallow(h, n: float):
     # `where`, not `clip`: clip passes only half the gradient at the boundary itself.
     h = jnp.where(h >= -H_SWITCH, h, -H_SWITCH)
     h = jnp.where(h <= _H_MAX, h, _H_MAX)
-    # Window in t: 12 + max(0, -h) covers the Gaussian (LITERATURE §1.6). For h > 5 the
+    # Window in t: 12 + max(0, -h) covers the Gaussian (phi < 1e-31 beyond). For h > 5 the
     # integrand ~ t^n exp(-h t) lives on t ≲ 1/h, so the window shrinks to 60/h (truncation
     # ~ 60^n e^-60 relative) to keep the nodes on it; otherwise the error grows to 1e-3 at h = 30.
     t_max = jnp.where(h > 5.0, 60.0 / jnp.maximum(h, 5.0), 12.0 + jnp.maximum(0.0, -h))
@@ -134,7 +135,7 @@ def gaussian_moment(h, n: float):
     **References:**
 
     - Greenwood, Williamson, *Proc. R. Soc. A* 295 (1966) 300 (definition of F_n).
-    - LITERATURE.md §1.6 (the `t = u²` Gauss–Legendre rule and its accuracy; re-verified here).
+    - docs/contact.md, "Gaussian moments" (the `t = u²` rule and its accuracy against mpmath).
     """
     n = _check_order(n)
     h = jnp.asarray(h, dtype=float)
@@ -149,7 +150,7 @@ def gaussian_smoothed_power(x, sigma, n: float):
     """Hertz power law averaged over Gaussian heights: `E[(x + σZ)_+^n] = σ^n F_n(−x/σ)`.
 
     This is the Greenwood–Williamson average that turns the Hertz law `K δ_+^n` into the
-    rough-surface law (DESIGN §2.3); it is written so that `σ = 0` is allowed and gives
+    rough-surface law (docs/contact.md); it is written so that `σ = 0` is allowed and gives
     `x_+^n` (to round-off), with finite gradients in `x` and `σ` there.
 
     **Arguments:**
@@ -160,7 +161,7 @@ def gaussian_smoothed_power(x, sigma, n: float):
 
     **Returns:** `E[(x + σZ)_+^n]` (units m^n), broadcast over `x` and `sigma`.
 
-    **References:** Greenwood & Williamson (1966); DESIGN.md §2.3.
+    **References:** Greenwood & Williamson, *Proc. R. Soc. A* 295 (1966) 300.
     """
     n = _check_order(n)
     if n < 0.0:

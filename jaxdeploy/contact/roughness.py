@@ -37,7 +37,8 @@ def ra_to_sigma(ra: ArrayLike) -> Array:
 
     **Returns:** `σ = sqrt(π/2) Ra ≈ 1.2533 Ra` (m).
 
-    **References:** DESIGN.md §2.5; LITERATURE.md §1.7 (Ra 0.8/1.6/3.2 µm → σ 1.00/2.01/4.01 µm).
+    Why: for a zero-mean Gaussian height z, `Ra = E|z| = sqrt(2/π) σ`
+    (Ra 0.8/1.6/3.2 µm → σ 1.00/2.01/4.01 µm).
     """
     check_nonnegative("ra", ra, unit="m")
     return _SIGMA_PER_RA * jnp.asarray(ra, dtype=float)
@@ -62,7 +63,7 @@ def combine_sigma(sigma_1: ArrayLike, sigma_2: ArrayLike) -> Array:
     **Returns:** σ (m). The gradient is finite everywhere; at `σ_1 = σ_2 = 0`, where the
     function has no derivative, it is defined as 0.
 
-    **References:** Greenwood, Williamson (1966); DESIGN.md §2.5.
+    **References:** Greenwood, Williamson, *Proc. R. Soc. A* 295 (1966) 300.
     """
     check_nonnegative("sigma_1", sigma_1, unit="m")
     check_nonnegative("sigma_2", sigma_2, unit="m")
@@ -97,7 +98,7 @@ class RoughnessCoupling(eqx.Module):
 
     Call: `coupling(base_value, ra) -> base_value (Ra/Ra_ref)^p`.
 
-    **References:** [proposal] DESIGN.md §2.5; LITERATURE.md §1.8 (no published law).
+    **References:** none: a proposal of ours (no published law; docs/contact.md).
     """
 
     reference_ra: Array = eqx.field(converter=lambda x: jnp.asarray(x, dtype=float))
@@ -127,7 +128,7 @@ class RestitutionRoughnessCoupling(eqx.Module):
 
     Call: `coupling(base_restitution, ra) -> c_e(Ra)`.
 
-    **References:** [proposal] DESIGN.md §2.5.
+    **References:** none: a proposal of ours (docs/contact.md).
     """
 
     reference_ra: Array = eqx.field(converter=lambda x: jnp.asarray(x, dtype=float))

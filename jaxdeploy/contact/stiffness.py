@@ -10,9 +10,9 @@ literature:
 
 The two are the same number because the π in `h_k` cancels the π in the prefactor. Mixing them
 — a π-containing `h_k` in the formula without π, or the reverse — changes K by a factor π
-(≈ 3.14). Published code does this (DyS: its plane–sphere K carries the π, its sphere–sphere K
-does not; LITERATURE §1.2). We compute `(4/3) E* sqrt(R*)` directly and test it against both
-written forms.
+(≈ 3.14). Published code does this (ladisk/DyS `contact_model.py`: its plane–sphere K carries
+the π, its sphere–sphere K does not). We compute `(4/3) E* sqrt(R*)` directly and test it
+against both written forms.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def effective_modulus(E_journal, nu_journal, E_bearing, nu_bearing):
 
     **Returns:** `E*` (Pa), from `1/E* = (1 − ν_j²)/E_j + (1 − ν_b²)/E_b`.
 
-    **References:** Johnson, *Contact Mechanics* (1985), eq. 4.22; DESIGN.md §2.3.
+    **References:** Johnson, *Contact Mechanics* (1985), eq. 4.22.
     """
     _check_material("journal", E_journal, nu_journal)
     _check_material("bearing", E_bearing, nu_bearing)
@@ -59,7 +59,8 @@ def radial_clearance(radius_bearing, radius_journal):
 
     **Returns:** `c` (m). Raises `ValueError` naming both radii when the journal does not fit.
 
-    **References:** DESIGN.md §2.2.
+    **References:** Flores et al., *Kinematics and Dynamics of Multibody Systems with Imperfect
+    Joints* (Springer, 2008).
     """
     check_positive("radius_bearing", radius_bearing, unit="m")
     check_positive("radius_journal", radius_journal, unit="m")
@@ -86,7 +87,7 @@ def effective_radius(radius_journal, clearance):
     **Returns:** `R*` (m). Conformal contact: `R*` is large (≈ R_j²/c), hence a stiff joint.
 
     **References:** Flores et al., *Kinematics and Dynamics of Multibody Systems with Imperfect
-    Joints* (Springer, 2008); LITERATURE.md §1.2.
+    Joints* (Springer, 2008).
     """
     check_positive("radius_journal", radius_journal, unit="m")
     check_positive("clearance", clearance, unit="m")
@@ -118,7 +119,7 @@ def journal_bearing_stiffness(
 
     - Lankarani, Nikravesh, *J. Mech. Des.* 112 (1990) 369 (the π form).
     - Flores et al. (2008), *Kinematics and Dynamics of Multibody Systems with Imperfect Joints*.
-    - DESIGN.md §2.3; LITERATURE.md §1.2.
+    - Johnson, *Contact Mechanics* (1985), eq. 4.22.
     """
     e_star = effective_modulus(E_journal, nu_journal, E_bearing, nu_bearing)
     r_star = effective_radius(radius_journal, clearance)

@@ -1,6 +1,7 @@
 """Derivatives of simulation outputs with respect to scene parameters.
 
-Discretise-then-differentiate through the integrator (DESIGN §5): the derivative is that of
+Discretise-then-differentiate through the integrator (Kidger, *On Neural Differential
+Equations*, PhD thesis, Oxford 2021; docs/identification.md): the derivative is that of
 the computed trajectory, with each Newton solve differentiated by the implicit-function
 theorem and the step sizes held fixed (the step-size controller runs under
 `stop_gradient`). Reverse mode (`diffrax.RecursiveCheckpointAdjoint`: memory bounded by the

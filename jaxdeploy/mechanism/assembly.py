@@ -1,4 +1,4 @@
-"""Consistent initial conditions for the index-3 equations (DESIGN §4).
+"""Consistent initial conditions for the index-3 equations.
 
 1. Positions: the pose nearest to a guess that satisfies the constraints,
    `min ½|q − q_g|²  s.t.  Φ(q, t) = 0  (and q_i = q_g,i for chosen i)`, by Gauss–Newton

@@ -3,7 +3,7 @@
 Each moving body k has coordinates `q_k = (x_k, y_k, θ_k)`: its centre of mass and its rotation
 from the global x axis. A point with body-frame coordinates `s'` sits at `r = r_k + A(θ_k) s'`
 and moves with `ṙ = ṙ_k + θ̇_k B(θ_k) s'`, `B = dA/dθ` (Nikravesh, *Computer-Aided Analysis of
-Mechanical Systems*, 1988, ch. 3; LITERATURE §1.1).
+Mechanical Systems*, 1988, ch. 3; Flores et al. 2008).
 
 The ground is the body named `"ground"`; its points are given in the global frame.
 """

@@ -1,5 +1,5 @@
 """Revolute joint with radial clearance: a journal moving freely inside a bearing until their
-surfaces meet (Flores & Ambrósio 2004; Flores et al. 2008; DESIGN §2.2; LITERATURE §1.1).
+surfaces meet (Flores & Ambrósio, *Comput. Struct.* 82 (2004) 1359; Flores et al. 2008).
 
 With P_i the bearing centre (on `bearing_body`) and P_j the journal centre (on `journal_body`):
 

@@ -1,7 +1,7 @@
 """Force elements: gravity, springs and dampers, the coil-spring drive, applied loads, the latch.
 
 Forces enter the equations of motion as generalized forces `Q(q, v, t)`; a force `f` at point
-P of body k contributes `(f_x, f_y, (r_P − r_k) × f)` to body k (LITERATURE §1.1).
+P of body k contributes `(f_x, f_y, (r_P − r_k) × f)` to body k (Nikravesh 1988).
 """
 
 from __future__ import annotations
@@ -125,7 +125,8 @@ class CoilSpringDrive(AbstractElement):
 
     `M(α) = k (α₀ − α) + k₃ (α₀ − α)³`, applied to body_b with the reaction on body_a, where
     `α = θ_b − θ_a − angle_offset` is the hinge angle and `α₀ > α` is the spring's free angle
-    (the preload is `k (α₀ − α_start)`). DESIGN §2.6; LITERATURE §4.2.
+    (the preload is `k (α₀ − α_start)`). The lock time of one panel,
+    `arccos((α₀ − α_L)/(α₀ − α_s))/ω`, is checked in tests/test_mechanism.py.
 
     **Arguments:** `stiffness` k [N m/rad] ≥ 0, `free_angle` α₀ [rad], `cubic_stiffness` k₃
     [N m/rad³] (default 0), `angle_offset` [rad] (default 0).
@@ -195,7 +196,8 @@ class AppliedForce(AbstractElement):
 
 class Latch(AbstractElement):
     """Deployment latch: once the hinge angle reaches `lock_angle` it engages for good and
-    holds the hinge with a stiff rotational spring–damper (DESIGN §2.6; LITERATURE §4.2):
+    holds the hinge with a stiff rotational spring–damper (a penalty model of ours;
+    docs/deploy_array_geometry.md §7 sets its numbers):
 
     `τ = −k_L (α − α_L) − c_L α̇` on body_b when engaged, 0 before; `α = θ_b − θ_a − angle_offset`.
 

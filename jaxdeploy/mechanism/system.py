@@ -1,6 +1,6 @@
 """A planar mechanism: bodies plus elements, and the functions the integrators need.
 
-Equations of motion in absolute coordinates (DESIGN §2.1; Nikravesh 1988; Haug 1989):
+Equations of motion in absolute coordinates (Nikravesh 1988; Haug 1989):
 
     M q̈ + Φ_q(q, t)ᵀ λ = Q(q, q̇, t; memory),     Φ(q, t) = 0      (index-3 DAE)
 

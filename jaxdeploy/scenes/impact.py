@@ -3,7 +3,7 @@ against closed forms.
 
 A free journal (mass m, no gravity) starts centred in a bearing fixed to the ground and moves
 along +x at `impact_speed`; it crosses the clearance, impacts, and rebounds. For the plain
-Hertz law (`damping = "none"`) Johnson's closed forms hold (LITERATURE §4.1):
+Hertz law (`damping = "none"`) Johnson's closed forms hold (*Contact Mechanics*, 1985, ch. 11):
 `δ_max = (5 m v0²/(4K))^(2/5)`, `F_max = K δ_max^(3/2)`, contact duration `2.9433 δ_max/v0`.
 With a damped law the rebound speed over the approach speed is the law's effective
 restitution.
@@ -83,7 +83,7 @@ class Impact(Scene):
 
 
 def hertz_impact_closed_form(mass, stiffness, speed):
-    """`(δ_max, F_max, t_c)` for `F = K δ^(3/2)` (Johnson, *Contact Mechanics*, 1985, §11.4;
-    LITERATURE §4.1)."""
+    """`(δ_max, F_max, t_c)` for `F = K δ^(3/2)` (Johnson, *Contact Mechanics*, 1985, ch. 11;
+    the constant 2.9433 = 2 ∫_0^1 (1 − x^(5/2))^(-1/2) dx)."""
     delta_max = (5.0 * mass * speed**2 / (4.0 * stiffness)) ** 0.4
     return delta_max, stiffness * delta_max**1.5, 2.9433 * delta_max / speed

@@ -5,8 +5,8 @@ rod–slider joint has a bearing of radius 10 mm on the slider and a journal of 
 (c = 0.5 mm); steel (E = 207 GPa, ν = 0.3); Lankarani–Nikravesh damping with c_e = 0.9;
 frictionless by default; gravity −y. It starts at crank angle 0 (top dead centre, crank along
 +x) with the journal centred in the bearing and the ideal mechanism's velocities, and runs two
-revolutions (DESIGN §3). Crank mass/inertia (0.30 kg, 1e-5 kg m²) and slider inertia
-(1e-4 kg m²) are the companions usually quoted with this case (LITERATURE §4.4, recalled and
+revolutions. Crank mass/inertia (0.30 kg, 1e-5 kg m²) and slider inertia
+(1e-4 kg m²) are the companions usually quoted with this case (Flores et al. 2006, recalled,
 unverified); the crank is driven and the slider does not rotate, so they change the joint
 reactions but not the motion.
 
@@ -157,7 +157,8 @@ class SliderCrank(Scene):
 
 
 def ideal_slider_kinematics(crank_length, rod_length, crank_speed, t):
-    """Closed-form in-line slider-crank kinematics from top dead centre (LITERATURE §4.3):
+    """Closed-form in-line slider-crank kinematics from top dead centre (`x(θ)` differentiated
+    twice; tests/test_mechanism.py checks v and a by complex-step differentiation):
 
     `x = r cos θ + l S`, `v = −r ω sin θ (1 + λ cos θ / S)`,
     `a = −r ω² [cos θ + λ cos 2θ / S + λ³ sin² 2θ / (4 S³)]`, `S = sqrt(1 − λ² sin² θ)`,

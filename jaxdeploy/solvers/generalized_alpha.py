@@ -1,7 +1,8 @@
 """Generalized-α for index-3 multibody DAEs, as a diffrax solver.
 
 Chung & Hulbert (1993) parameters from the spectral radius at infinity ρ∞, in the
-Arnold–Brüls convention, which weights the **old** level (LITERATURE §2.1–2.3):
+Arnold–Brüls convention, which weights the **old** level (Arnold & Brüls, *Multibody Syst.
+Dyn.* 18 (2007) 185):
 
     (1 − α_m) a_{n+1} + α_m a_n = (1 − α_f) q̈_{n+1} + α_f q̈_n
     q_{n+1} = q_n + h q̇_n + h² (½ − β) a_n + h² β a_{n+1}
@@ -19,10 +20,10 @@ multiplier `μ = λ/β'`, `β' = (1 − α_m)/(h² β (1 − α_f))`, `γ' = γ/
 
 This is Arnold & Brüls' Algorithm 1 with both the dynamic rows divided by β' and λ rescaled, so
 the iteration matrix `[[M + (K_t + γ' C_t)/β', Φ_qᵀ], [Φ_q, 0]]` stays O(1) as h → 0 (Bottasso,
-Bauchau & Cardona 2007 scaling; LITERATURE §2.4). The iteration matrix comes from JAX
-forward-mode derivatives, compressed along the mechanism's sparsity (`StepSystem`); by default
-it is factorised once and reused across iterations and steps until convergence slows
-(modified Newton, see `GeneralizedAlpha`). The
+Bauchau & Cardona, *SIAM J. Sci. Comput.* 29 (2007) 397, recalled, unverified). The iteration
+matrix comes from JAX forward-mode derivatives, compressed along the mechanism's sparsity
+(`StepSystem`); by default it is factorised once and reused across iterations and steps until
+convergence slows (modified Newton, see `GeneralizedAlpha`). The
 converged solve is differentiated by the implicit-function theorem (`lax.custom_root`) with the
 exact Jacobian, never by unrolling the iterations.
 
@@ -275,7 +276,7 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
 
     **Arguments:**
     - `rho_inf`: spectral radius at infinity ρ∞ ∈ [0, 1]; < 1 damps the parasitic index-3
-      modes (LITERATURE §2.5). Default 0.8.
+      modes (Arnold & Brüls 2007; docs/verification.md, λ start-up transient). Default 0.8.
     - `newton_atol`, `newton_rtol`: a Newton iteration has converged when every position
       correction `|Δu_i| ≤ atol + rtol |q_i|` [m or rad] (the scaled multipliers likewise, in
       units of the mean mass times that bound).
