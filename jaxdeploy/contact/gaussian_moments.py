@@ -56,21 +56,26 @@ def positive_power(base, n: float):
 
     **Arguments:** `base` (array), `n` (static Python number ≥ 0).
 
-    **Returns:** `max(base, 0)**n`, with `0**0 = 0` (a Heaviside step for `n = 0`).
+    **Returns:** `max(base, 0)**n`, with `0**0 = 0` (a Heaviside step for `n = 0`); NaN where
+    `base` is NaN. Every comparison with NaN is false, so the conditions are written to send
+    a NaN down the `base**n` branch: a NaN state must give a NaN force, never 0.
     """
     base = jnp.asarray(base, dtype=float)
     if n == 0.0:
-        return jnp.where(base > 0, 1.0, 0.0).astype(jnp.result_type(base, float))
-    positive = base > 0
-    safe = jnp.where(positive, base, 1.0)
-    return jnp.where(positive, safe**n, 0.0)
+        step = jnp.where(base > 0, 1.0, jnp.where(jnp.isnan(base), base, 0.0))
+        return step.astype(jnp.result_type(base, float))
+    gap = base <= 0
+    safe = jnp.where(gap, 1.0, base)
+    return jnp.where(gap, 0.0, safe**n)
 
 
 def _shallow(h, n: float):
     """`F_n(h)` by the `t = u²` Gauss–Legendre rule; accurate for `-H_SWITCH <= h`."""
-    # `where`, not `clip`: clip passes only half the gradient at the boundary itself.
-    h = jnp.where(h >= -H_SWITCH, h, -H_SWITCH)
-    h = jnp.where(h <= _H_MAX, h, _H_MAX)
+    # `where`, not `clip`: clip passes only half the gradient at the boundary itself. The
+    # conditions select the clamp only when it is true, so a NaN h stays NaN (a NaN state
+    # must give a NaN force, not the force at a clamp).
+    h = jnp.where(h < -H_SWITCH, -H_SWITCH, h)
+    h = jnp.where(h > _H_MAX, _H_MAX, h)
     # Window in t: 12 + max(0, -h) covers the Gaussian (phi < 1e-31 beyond). For h > 5 the
     # integrand ~ t^n exp(-h t) lives on t ≲ 1/h, so the window shrinks to 60/h (truncation
     # ~ 60^n e^-60 relative) to keep the nodes on it; otherwise the error grows to 1e-3 at h = 30.
@@ -179,6 +184,7 @@ def gaussian_smoothed_power(x, sigma, n: float):
     # shallow_h ≥ −H_SWITCH here, so only the shallow rule of `gaussian_moment` is needed.
     moment = 0.5 * erfc(shallow_h / np.sqrt(2.0)) if n == 0.0 else _shallow(shallow_h, n)
     shallow = _power(safe_sigma, n) * moment
-    # σ = 0 and x <= 0: nominal gap without roughness -> Hertz gives exactly 0.
-    shallow = jnp.where(positive, shallow, 0.0)
+    # σ = 0 and x <= 0: nominal gap without roughness -> Hertz gives exactly 0 (a NaN x keeps
+    # its NaN, carried through the shallow branch).
+    shallow = jnp.where(positive | jnp.isnan(x), shallow, 0.0)
     return jnp.where(deep_mask, deep, shallow)
