@@ -1,13 +1,146 @@
 """jaxdeploy: differentiable dynamics of deployable mechanisms with rough clearance joints.
 
+The names a user needs, in one place (the submodules behind them may move; these names stay):
+
+* run a ready-made scene: `get_scene` / `SCENES`, `DeployArray`, `SliderCrank`, `Impact`,
+  `Pendulum` (all `Scene`s), then `simulate` → `Trajectory`; many parameter sets at once with
+  `simulate_batch`; step control in `StepControl`;
+* build a mechanism: `Mechanism`, `Body`, the ideal joints `Revolute`, `Prismatic`, `Weld`,
+  `AngleDriver`, the clearance joint `RevoluteClearance`, the force elements `Gravity`,
+  `Spring`, `RotationalSpring`, `CoilSpringDrive`, `Latch`, `AppliedForce`, `AppliedTorque`, and
+  `consistent_state` for the initial state; contact laws are in the module `contact`;
+* identify, design and sweep: the modules `fit` (`fit.fit`, `fit.parameter_jacobian`),
+  `optimize` (`optimize.optimize`, `optimize.DesignProblem`) and `sweep` (`sweep.sweep`,
+  `sweep.load_sweep`). They are modules, not functions, because `jaxdeploy.fit`,
+  `jaxdeploy.optimize` and `jaxdeploy.sweep` are subpackages: Python binds the name of an
+  imported submodule on its package, so a function of the same name would be replaced by the
+  module as soon as anything imported it.
+
+Names are imported on first use (PEP 562 `__getattr__`), so `import jaxdeploy` stays as cheap as
+importing JAX: the command-line help does not pay for diffrax, optax and the scenes.
+
 Importing jaxdeploy switches JAX to float64: contact penetrations are micrometres on bodies that
 move metres, and impact forces span ten decades, which float32 cannot resolve (diffrax's
 documentation, "How to choose a solver", asks for 64-bit below tolerances of ~1e-8).
 Simulation code assumes 64-bit throughout.
 """
 
+import importlib
+from typing import TYPE_CHECKING
+
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
 __version__ = "0.1.0"
+
+# Public name -> the module that defines it (a module name maps to itself).
+_EXPORTS = {
+    # simulation
+    "simulate": "jaxdeploy.simulation",
+    "Trajectory": "jaxdeploy.simulation",
+    "StepControl": "jaxdeploy.simulation",
+    "simulate_batch": "jaxdeploy.batch",
+    # scenes
+    "Scene": "jaxdeploy.scenes",
+    "SCENES": "jaxdeploy.scenes",
+    "get_scene": "jaxdeploy.scenes",
+    "DeployArray": "jaxdeploy.scenes",
+    "SliderCrank": "jaxdeploy.scenes",
+    "Impact": "jaxdeploy.scenes",
+    "Pendulum": "jaxdeploy.scenes",
+    # building a mechanism
+    "Mechanism": "jaxdeploy.mechanism",
+    "Body": "jaxdeploy.mechanism",
+    "Revolute": "jaxdeploy.mechanism",
+    "Prismatic": "jaxdeploy.mechanism",
+    "Weld": "jaxdeploy.mechanism",
+    "AngleDriver": "jaxdeploy.mechanism",
+    "RevoluteClearance": "jaxdeploy.mechanism",
+    "Gravity": "jaxdeploy.mechanism",
+    "Spring": "jaxdeploy.mechanism",
+    "RotationalSpring": "jaxdeploy.mechanism",
+    "CoilSpringDrive": "jaxdeploy.mechanism",
+    "Latch": "jaxdeploy.mechanism",
+    "AppliedForce": "jaxdeploy.mechanism",
+    "AppliedTorque": "jaxdeploy.mechanism",
+    "consistent_state": "jaxdeploy.mechanism",
+}
+_MODULES = ("contact", "mechanism", "solvers", "scenes", "analysis", "fit", "optimize", "sweep")
+
+__all__ = [  # = _EXPORTS + _MODULES + __version__ (tests/test_public_api.py checks it)
+    "SCENES",
+    "AngleDriver",
+    "AppliedForce",
+    "AppliedTorque",
+    "Body",
+    "CoilSpringDrive",
+    "DeployArray",
+    "Gravity",
+    "Impact",
+    "Latch",
+    "Mechanism",
+    "Pendulum",
+    "Prismatic",
+    "Revolute",
+    "RevoluteClearance",
+    "RotationalSpring",
+    "Scene",
+    "SliderCrank",
+    "Spring",
+    "StepControl",
+    "Trajectory",
+    "Weld",
+    "__version__",
+    "analysis",
+    "consistent_state",
+    "contact",
+    "fit",
+    "get_scene",
+    "mechanism",
+    "optimize",
+    "scenes",
+    "simulate",
+    "simulate_batch",
+    "solvers",
+    "sweep",
+]
+
+
+def __getattr__(name: str):
+    if name in _MODULES:
+        # Importing a submodule binds it on this package, so __getattr__ is not called again.
+        return importlib.import_module(f"{__name__}.{name}")
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
+
+
+if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
+    from . import analysis, contact, fit, mechanism, optimize, scenes, solvers, sweep
+    from .batch import simulate_batch
+    from .mechanism import (
+        AngleDriver,
+        AppliedForce,
+        AppliedTorque,
+        Body,
+        CoilSpringDrive,
+        Gravity,
+        Latch,
+        Mechanism,
+        Prismatic,
+        Revolute,
+        RevoluteClearance,
+        RotationalSpring,
+        Spring,
+        Weld,
+        consistent_state,
+    )
+    from .scenes import SCENES, DeployArray, Impact, Pendulum, Scene, SliderCrank, get_scene
+    from .simulation import StepControl, Trajectory, simulate
