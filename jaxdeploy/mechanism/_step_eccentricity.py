@@ -33,8 +33,8 @@ ds/dθ = −∂_θδ / δ'(s); at the peak δ̈ = 0, so v⁻ = δ̇(s_peak) need
 (envelope theorem) and the peak's location is gradient-stopped.
 
 `m` carries the world positions' round-off divided by h: a step that lands on a requested
-time can be 1e-19 s long, where (e₁ − e₀)/h is pure round-off (it once made v⁻ = 95 m/s in a
-1 m/s impact, slider_crank with Dopri8 and `step_ts`). Where that round-off exceeds 1e-6 of
+time can be 1e-19 s long, where (e₁ − e₀)/h is pure round-off and can exceed the true speed
+by orders of magnitude. Where that round-off exceeds 1e-6 of
 the end speeds, m is the trapezoid value (a + b)/2: ė is then linear over the step and
 nothing a step that short can resolve is lost.
 """
