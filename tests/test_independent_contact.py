@@ -175,9 +175,7 @@ def test_spinning_journal_friction_circle_closed_form():
         ground_points={"B": (0.0, 0.0)},
     )
     centre = np.array([-distance * math.sin(alpha), -distance * math.cos(alpha)])
-    state = consistent_state(
-        mech, jnp.array([*centre, 0.0]), jnp.array([0.0, 0.0, omega0])
-    )
+    state = consistent_state(mech, jnp.array([*centre, 0.0]), jnp.array([0.0, 0.0, omega0]))
     t_end = 0.05
     ts = np.linspace(0.0, t_end, 51)
     run = simulate(mech, state, t_end, ts=ts, rtol=1e-10, atol=1e-13)
