@@ -168,3 +168,61 @@ def test_a_step_too_short_to_resolve_e_adds_no_interior_peak():
     t_peak = brentq(acceleration, 8e-6, H, xtol=1e-22, rtol=1e-15)
     np.testing.assert_allclose(float(_path(0.0, roundoff=roundoff).max_rate(0.0)), rate(t_peak),
                                rtol=1e-12)  # fmt: skip
+
+
+# --- the impact-velocity rule of RevoluteClearance, on a contact the mechanism drives in ---
+
+DRIVEN_C = 1e-4  # m
+DRIVEN_H = 1e-4  # s
+# x(t) = 5e-5 + 0.5 t + 2000 t² + 1e7 t³ (m, t in s): a journal that crosses the clearance
+# at ~0.6 m/s and keeps speeding up inside the step (the mechanism drives it in), as the Flores
+# slider-crank's first impact does.
+DRIVEN_X = np.array([1e7, 2000.0, 0.5, 5e-5])
+
+
+def _driven_joint(rule):
+    from jaxdeploy.contact import HertzElastic, LankaraniNikravesh
+    from jaxdeploy.mechanism import Body, Mechanism, RevoluteClearance
+
+    joint = RevoluteClearance(
+        "ground",
+        "B",
+        "journal",
+        "c",
+        clearance=DRIVEN_C,
+        journal_radius=5e-3,
+        normal=LankaraniNikravesh(HertzElastic(1e10), 0.9),
+        impact_velocity_rule=rule,
+    )
+    body = Body("journal", 1.0, 1e-5, {"c": (0.0, 0.0)})
+    return joint, Mechanism([body], [joint], ground_points={"B": (0.0, 0.0)})
+
+
+@pytest.mark.parametrize("rule", ["onset", "running_max"])
+def test_impact_velocity_rule_on_a_contact_driven_in(rule):
+    """`onset` keeps δ̇ at the onset (Lankarani & Nikravesh 1990), `running_max` the largest
+    δ̇ since; both against the exact cubic path, solved with numpy."""
+    joint, mech = _driven_joint(rule)
+    dx = np.polyder(DRIVEN_X)
+
+    def state(t):
+        q = jnp.array([np.polyval(DRIVEN_X, t), 0.0, 0.0])
+        v = jnp.array([np.polyval(dx, t), 0.0, 0.0])
+        return mech.kinematics(q, v)
+
+    memory = joint.init_memory(state(0.0))
+    memory = joint.memory_after_step(memory, state(DRIVEN_H), DRIVEN_H)
+    t_on = brentq(lambda t: np.polyval(DRIVEN_X, t) - DRIVEN_C, 0.0, DRIVEN_H, xtol=1e-16)
+    expected = np.polyval(dx, t_on) if rule == "onset" else np.polyval(dx, DRIVEN_H)
+    assert float(memory["in_contact"]) == 1.0
+    np.testing.assert_allclose(float(memory["impact_velocity"]), expected, rtol=1e-10)
+    np.testing.assert_allclose(float(memory["event_fraction"]), t_on / DRIVEN_H, rtol=1e-9)
+    # In contact, the damping law sees the held v⁻ (onset) or the larger present δ̇ (running_max).
+    faster = joint.geometry(state(DRIVEN_H)).penetration_rate
+    seen = joint._impact_velocity(memory, jnp.stack([faster, -faster]))[0]
+    assert float(seen) == pytest.approx(expected if rule == "onset" else float(faster))
+
+
+def test_unknown_impact_velocity_rule_is_refused_with_the_valid_ones():
+    with pytest.raises(ValueError, match="onset, running_max"):
+        _driven_joint("peak")

@@ -149,9 +149,8 @@ class _SinglePoint(RevoluteClearance):
 
     def wrenches(self, kin, t, memory):
         g = self.geometry(kin)
-        v_minus = (
-            None if memory is None else jnp.maximum(memory["impact_velocity"], g.penetration_rate)
-        )
+        # The joint's own impact-velocity rule, on the near side's rate.
+        v_minus = None if memory is None else self._impact_velocity(memory, g.penetration_rate)
         fn = self.normal.force(g.penetration, g.penetration_rate, v_minus)
         ft = 0.0 if self.friction is None else self.friction.force(g.sliding_velocity, fn)
         f = -(fn * g.normal + ft * g.tangent)
@@ -168,7 +167,7 @@ def _single_point(joint):
     return _SinglePoint(
         joint.bearing_body, joint.bearing_point, joint.journal_body, joint.journal_point,
         clearance=joint.clearance, journal_radius=joint.journal_radius, normal=joint.normal,
-        friction=joint.friction,
+        friction=joint.friction, impact_velocity_rule=joint.impact_velocity_rule,
     )  # fmt: skip
 
 

@@ -46,6 +46,32 @@ def test_solver_is_chosen_by_name_and_a_bad_name_is_refused(tmp_path, capsys):
         assert not any(tmp_path.glob(command[-1].rsplit("/", 1)[-1] + "/*"))
 
 
+def test_impact_velocity_rule_is_a_scene_option_recorded_in_the_summary(tmp_path, capsys):
+    """Both rules run from the command line and say which one made the result (what each rule
+    does is tests/test_clearance_memory.py's); bad values are refused before any output."""
+    for rule in ("onset", "running_max"):
+        out = tmp_path / rule
+        args = ["simulate", "impact", "--out", str(out), "--quiet"]
+        options = ["--scene-option", "damping=lankarani_nikravesh"]
+        assert main([*args, *options, "--scene-option", f"impact_velocity_rule={rule}"]) == 0
+        summary = json.loads((out / "summary.json").read_text())
+        assert summary["scene_options"] == {
+            "damping": "lankarani_nikravesh",
+            "impact_velocity_rule": rule,
+        }
+        assert summary["status"] == "ok"
+    for bad, words in (
+        ("impact_velocity_rule=peak", ["impact_velocity_rule = 'peak'", "running_max"]),
+        ("rule=onset", ["unknown option 'rule'", "impact_velocity_rule"]),
+        ("impact_velocity_rule", ["KEY=VALUE"]),
+    ):
+        out = tmp_path / "bad"
+        assert main(["simulate", "impact", "--out", str(out), "--scene-option", bad]) == 2
+        err = capsys.readouterr().err
+        assert all(w in err for w in words), err
+        assert not out.exists()
+
+
 def test_out_of_range_parameter_names_the_range(tmp_path, capsys):
     code = main(
         ["simulate", "slider_crank", "--set", "clearance=-1e-4", "--out", str(tmp_path / "c")]

@@ -42,8 +42,22 @@ def test_chi_matches_literature_table(cls):
 def test_force_formula(cls):
     law = cls(HertzElastic(K), 0.8)
     delta, rate, v_minus = 2e-6, -0.3, 0.5
-    expected = K * delta**1.5 * (1 + CHI[cls](0.8) * rate / np.hypot(v_minus, 1e-4))
-    assert float(law.force(delta, rate, v_minus)) == pytest.approx(expected, rel=1e-13)
+    # Above the floor the law is exactly the published one: v⁻ enters unmodified.
+    expected = K * delta**1.5 * (1 + CHI[cls](0.8) * rate / v_minus)
+    assert float(law.force(delta, rate, v_minus)) == pytest.approx(expected, rel=1e-14)
+
+
+@pytest.mark.parametrize("cls", RESTITUTION_LAWS)
+def test_impact_velocity_floor(cls):
+    floor = 2e-3
+    law = cls(HertzElastic(K), 0.8, impact_velocity_floor=floor)
+    delta, rate = 2e-6, 1e-3
+    at_floor = K * delta**1.5 * (1 + CHI[cls](0.8) * rate / floor)
+    # A contact that began at rest (v⁻ = 0) or slower than the floor divides by the floor.
+    for v_minus in (0.0, 1e-3, floor):
+        assert float(law.force(delta, rate, v_minus)) == pytest.approx(at_floor, rel=1e-14)
+    with pytest.raises(ValueError, match="impact_velocity_floor"):
+        cls(HertzElastic(K), 0.8, impact_velocity_floor=0.0)
 
 
 finite = dict(allow_nan=False, allow_infinity=False)

@@ -38,3 +38,29 @@ def solver_control(scene, name) -> dict:
             raise ValueError(f"--solver = {name!r} is unknown; valid: {', '.join(SOLVER_NAMES)}")
         control["solver"] = name
     return control
+
+
+SCENE_OPTION_HELP = (
+    "scene option KEY=VALUE (repeatable), e.g. impact_velocity_rule=running_max; "
+    "`jaxdeploy simulate SCENE --help` does not list them: see docs/contact.md"
+)
+
+
+def parse_pairs(items, flag: str) -> dict:
+    """`KEY=VALUE` items of a repeatable flag; a VALUE that parses as JSON (e.g. `true`,
+    `{"J1": "panel1"}`) is decoded, anything else is kept as a string. A malformed or repeated
+    KEY raises ValueError naming `flag`."""
+    import json
+
+    out = {}
+    for item in items:
+        if "=" not in item:
+            raise ValueError(f"{flag} expects KEY=VALUE, got {item!r}")
+        key, value = (s.strip() for s in item.split("=", 1))
+        if key in out:
+            raise ValueError(f"{flag} {key} is given twice")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import sys
 
+from . import SCENE_OPTION_HELP, parse_pairs
+
 NAME = "fit"
 HELP = "fit scene parameters to measured channels (CSV/npz), with uncertainties"
 
@@ -34,7 +36,7 @@ def add_arguments(parser) -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="scene constructor option, e.g. damping=lankarani_nikravesh",
+        help=SCENE_OPTION_HELP,
     )
     parser.add_argument(
         "--channels",
@@ -103,22 +105,6 @@ def add_arguments(parser) -> None:
 def _fail(message: str) -> int:
     print(f"error: {message}", file=sys.stderr)
     return 2
-
-
-def _pairs(items, what):
-    """KEY=VALUE items; a VALUE that parses as JSON (e.g. `{"J1": "panel1"}`) is decoded."""
-    import json
-
-    out = {}
-    for item in items:
-        if "=" not in item:
-            raise ValueError(f"{what} expects KEY=VALUE, got {item!r}")
-        key, value = (s.strip() for s in item.split("=", 1))
-        try:
-            out[key] = json.loads(value)
-        except json.JSONDecodeError:
-            out[key] = value
-    return out
 
 
 def _windows(items):
@@ -210,7 +196,7 @@ def run(args) -> int:
     from .simulate import parse_assignments
 
     try:
-        scene = get_scene(args.scene, **_pairs(args.scene_option, "--scene-option"))
+        scene = get_scene(args.scene, **parse_pairs(args.scene_option, "--scene-option"))
     except (ValueError, TypeError) as err:
         return _fail(f"--scene {args.scene}: {err}")
     try:
@@ -285,7 +271,7 @@ def run(args) -> int:
     report = result.report()
     report.update(
         scene=scene.name,
-        scene_options=_pairs(args.scene_option, "--scene-option"),
+        scene_options=parse_pairs(args.scene_option, "--scene-option"),
         data=args.data,
         channels=list(data.names),
         noise_levels=result.comparison.sigma,

@@ -8,7 +8,7 @@ import os
 import sys
 import time
 
-from . import SOLVER_HELP, solver_control
+from . import SCENE_OPTION_HELP, SOLVER_HELP, parse_pairs, solver_control
 
 NAME = "simulate"
 HELP = "run a scene and write trajectory, plots, summary"
@@ -17,7 +17,16 @@ DEFAULT_SCENE = "deploy_array"
 
 def add_arguments(parser) -> None:
     parser.add_argument("scene", nargs="?", help=f"scene name (default {DEFAULT_SCENE})")
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="scene parameter in SI units (repeatable); unknown names list the valid ones",
+    )
+    parser.add_argument(
+        "--scene-option", action="append", default=[], metavar="KEY=VALUE", help=SCENE_OPTION_HELP
+    )
     parser.add_argument("--t-end", type=float, default=None, help="end time [s]")
     parser.add_argument("--out", default=None, help="output folder (default results/SCENE)")
     parser.add_argument("--n-save", type=int, default=2001, help="number of saved states")
@@ -63,7 +72,10 @@ def run(args) -> int:
     scene_name = args.scene or DEFAULT_SCENE
     if scene_name not in SCENES:
         return _refuse(f"unknown scene {scene_name!r}; valid: {', '.join(sorted(SCENES))}")
-    scene = get_scene(scene_name)
+    try:
+        scene = get_scene(scene_name, **parse_pairs(args.scene_option, "--scene-option"))
+    except ValueError as err:
+        return _refuse(f"--scene-option: {err}")
     try:
         params = scene.resolve_params(parse_assignments(args.set))
     except ValueError as err:
@@ -123,6 +135,7 @@ def run(args) -> int:
     }
     summary.update(scene.summary(params, mechanism, trajectory))
     summary["params"] = params
+    summary["scene_options"] = scene.options
     # simulate draws no random numbers: the run is reproducible from params and versions.
     summary["seed"] = None
     summary["step_control"] = control
@@ -137,7 +150,11 @@ def run(args) -> int:
     )
     figures = scene.plot(params, mechanism, trajectory, out)
     atomic_write_json(f"{out}/summary.json", summary)
-    shown = {k: v for k, v in summary.items() if k not in ("params", "versions", "step_control")}
+    shown = {
+        k: v
+        for k, v in summary.items()
+        if k not in ("params", "scene_options", "versions", "step_control")
+    }
     print(json.dumps(shown, indent=2, default=float))
     print(f"wrote {out}/summary.json, {out}/trajectory.npz" + "".join(f", {f}" for f in figures))
     return 0 if trajectory.ok else 1

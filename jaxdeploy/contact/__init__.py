@@ -6,7 +6,7 @@ exponents and shapes are static), so a scene composes exactly the laws it uses. 
 """
 
 from .damping import (
-    VELOCITY_FLOOR,
+    DEFAULT_IMPACT_VELOCITY_FLOOR,
     AbstractNormalLaw,
     AbstractRestitutionLaw,
     Flores,
@@ -49,7 +49,7 @@ from .stiffness import (
 )
 
 __all__ = [
-    "VELOCITY_FLOOR",
+    "DEFAULT_IMPACT_VELOCITY_FLOOR",
     "AbstractNormalLaw",
     "AbstractRestitutionLaw",
     "Flores",

@@ -7,7 +7,9 @@ Restitution-calibrated family (Lankarani & Nikravesh 1990, eq. for F_N; docs/con
 with δ' the penetration rate (> 0 approaching), v⁻ the approach speed latched at the onset of
 the current contact (a memory variable the caller keeps, see `AbstractElasticLaw.
 onset_penetration`) and χ the law's hysteresis factor. The `max(0, ·)` removes the spurious
-tensile force these laws predict just before separation. Also a memoryless law (Hunt–Crossley
+tensile force these laws predict just before separation. Below the law's
+`impact_velocity_floor` (m/s) the damping term divides by the floor instead of v⁻, so a contact
+that begins at rest keeps a finite damping coefficient. Also a memoryless law (Hunt–Crossley
 with material damping α) and an undamped one.
 
 All laws are `eqx.Module`s: `elastic` is any elastic law module, numbers are array leaves.
@@ -24,11 +26,11 @@ import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
-from .._validation import check_nonnegative, check_range
+from .._validation import check_nonnegative, check_positive, check_range
 from .elastic import AbstractElasticLaw
 
 __all__ = [
-    "VELOCITY_FLOOR",
+    "DEFAULT_IMPACT_VELOCITY_FLOOR",
     "AbstractNormalLaw",
     "AbstractRestitutionLaw",
     "Undamped",
@@ -40,17 +42,12 @@ __all__ = [
     "HuntCrossleyMaterial",
 ]
 
-# Smallest approach speed (m/s) used in χ δ'/v⁻. Hinge impacts run at mm/s to m/s; a contact
-# that starts with v⁻ → 0 (resting, or grazing) would otherwise get an unbounded damping
-# coefficient χ K δ^n / v⁻ and a stiff, ill-conditioned ODE. With v_eff = sqrt(v⁻² + floor²)
-# (smooth, sign-agnostic) the bias is < 5e-5 relative for v⁻ ≥ 1e-2 m/s; slower impacts are
-# damped *less* than nominal (their effective restitution is closer to 1).
-VELOCITY_FLOOR = 1e-4
-
-
-def _effective_impact_speed(impact_velocity):
-    v = jnp.asarray(impact_velocity, dtype=float)
-    return jnp.sqrt(v * v + VELOCITY_FLOOR**2)
+# Default of `impact_velocity_floor` (m/s): the smallest impact velocity the damping term
+# divides by. Hinge impacts run at mm/s to m/s; a contact that begins at rest (v⁻ = 0) would get
+# an unbounded damping coefficient χ K δⁿ/v⁻. Above the floor the law is exactly the published
+# one (v_eff = max(v⁻, floor)); a slower impact is damped as if it came in at the floor speed,
+# i.e. less than nominal.
+DEFAULT_IMPACT_VELOCITY_FLOOR = 1e-4
 
 
 def _float_array(x):
@@ -81,30 +78,35 @@ class AbstractRestitutionLaw(AbstractNormalLaw):
     """
 
     restitution: eqx.AbstractVar[Array]
+    impact_velocity_floor: eqx.AbstractVar[Array]
     needs_impact_velocity: ClassVar[bool] = True
 
     def __check_init__(self):
         check_range("restitution", self.restitution, 0.0, 1.0, low_inclusive=False)
+        check_positive("impact_velocity_floor", self.impact_velocity_floor, "m/s")
 
     @abc.abstractmethod
     def chi(self) -> Array:
         """Dimensionless hysteresis factor χ(c_e)."""
 
     def force(self, delta: ArrayLike, delta_dot: ArrayLike, impact_velocity=None) -> Array:
-        """`F_N = max(0, F_e(δ) (1 + χ δ'/v_eff))`, `v_eff = sqrt(v⁻² + VELOCITY_FLOOR²)` (N)."""
+        """`F_N = max(0, F_e(δ) (1 + χ δ'/v_eff))`, `v_eff = max(v⁻, impact_velocity_floor)`
+        (N)."""
         if impact_velocity is None:
             raise TypeError(
                 f"{type(self).__name__} needs impact_velocity (the approach speed at contact "
                 "onset); use HuntCrossleyMaterial for a memoryless law."
             )
-        ratio = jnp.asarray(delta_dot, dtype=float) / _effective_impact_speed(impact_velocity)
+        v_eff = jnp.maximum(jnp.asarray(impact_velocity, dtype=float), self.impact_velocity_floor)
+        ratio = jnp.asarray(delta_dot, dtype=float) / v_eff
         return jnp.maximum(0.0, self.elastic.force(delta) * (1.0 + self.chi() * ratio))
 
 
 class HuntCrossley(AbstractRestitutionLaw):
     """Hunt–Crossley: `χ = 3(1 − c_e)/2`.
 
-    **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1].
+    **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1],
+    `impact_velocity_floor` (m/s, > 0; default 1e-4).
 
     **References:** Hunt, Crossley, *J. Appl. Mech.* 42 (1975) 440, in the form used by MBS
     reviews (second-hand: not checked in the 1975 paper).
@@ -112,6 +114,9 @@ class HuntCrossley(AbstractRestitutionLaw):
 
     elastic: AbstractElasticLaw
     restitution: Array = eqx.field(converter=_float_array)
+    impact_velocity_floor: Array = eqx.field(
+        converter=_float_array, default=DEFAULT_IMPACT_VELOCITY_FLOOR
+    )
 
     def chi(self) -> Array:
         return 1.5 * (1.0 - self.restitution)
@@ -120,13 +125,17 @@ class HuntCrossley(AbstractRestitutionLaw):
 class LankaraniNikravesh(AbstractRestitutionLaw):
     """Lankarani–Nikravesh: `χ = 3(1 − c_e²)/4`. Valid only for c_e near 1 (small losses).
 
-    **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1].
+    **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1],
+    `impact_velocity_floor` (m/s, > 0; default 1e-4).
 
     **References:** Lankarani, Nikravesh, *J. Mech. Des.* 112 (1990) 369.
     """
 
     elastic: AbstractElasticLaw
     restitution: Array = eqx.field(converter=_float_array)
+    impact_velocity_floor: Array = eqx.field(
+        converter=_float_array, default=DEFAULT_IMPACT_VELOCITY_FLOOR
+    )
 
     def chi(self) -> Array:
         return 0.75 * (1.0 - self.restitution**2)
@@ -135,13 +144,17 @@ class LankaraniNikravesh(AbstractRestitutionLaw):
 class Flores(AbstractRestitutionLaw):
     """Flores et al. (2011): `χ = 8(1 − c_e)/(5 c_e)`. Diverges as c_e → 0.
 
-    **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1].
+    **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1],
+    `impact_velocity_floor` (m/s, > 0; default 1e-4).
 
     **References:** Flores, Machado, Silva, Martins, *Multibody Syst. Dyn.* 25 (2011) 357.
     """
 
     elastic: AbstractElasticLaw
     restitution: Array = eqx.field(converter=_float_array)
+    impact_velocity_floor: Array = eqx.field(
+        converter=_float_array, default=DEFAULT_IMPACT_VELOCITY_FLOOR
+    )
 
     def chi(self) -> Array:
         return 1.6 * (1.0 - self.restitution) / self.restitution
@@ -150,7 +163,8 @@ class Flores(AbstractRestitutionLaw):
 class Gonthier(AbstractRestitutionLaw):
     """Gonthier et al. (2004): `χ = (1 − c_e²)/c_e`.
 
-    **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1].
+    **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1],
+    `impact_velocity_floor` (m/s, > 0; default 1e-4).
 
     **References:** Gonthier, McPhee, Lange, Piedbœuf, *Multibody Syst. Dyn.* 11 (2004) 209
     (recalled, unverified).
@@ -158,6 +172,9 @@ class Gonthier(AbstractRestitutionLaw):
 
     elastic: AbstractElasticLaw
     restitution: Array = eqx.field(converter=_float_array)
+    impact_velocity_floor: Array = eqx.field(
+        converter=_float_array, default=DEFAULT_IMPACT_VELOCITY_FLOOR
+    )
 
     def chi(self) -> Array:
         return (1.0 - self.restitution**2) / self.restitution
@@ -172,7 +189,8 @@ class HuGuo(AbstractRestitutionLaw):
     We keep the recalled form: only it has the small-loss limit `χ → 3(1 − c_e)/2` shared by
     Hunt–Crossley, Lankarani–Nikravesh and Flores (the DyS form halves it). See docs/contact.md.
 
-    **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1].
+    **Arguments:** `elastic` (elastic law), `restitution` c_e ∈ (0, 1],
+    `impact_velocity_floor` (m/s, > 0; default 1e-4).
 
     **References:** Hu, Guo, *Multibody Syst. Dyn.* 35 (2015) 131,
     doi:10.1007/s11044-015-9453-z (not checked).
@@ -180,6 +198,9 @@ class HuGuo(AbstractRestitutionLaw):
 
     elastic: AbstractElasticLaw
     restitution: Array = eqx.field(converter=_float_array)
+    impact_velocity_floor: Array = eqx.field(
+        converter=_float_array, default=DEFAULT_IMPACT_VELOCITY_FLOOR
+    )
 
     def chi(self) -> Array:
         return 1.5 * (1.0 - self.restitution) / self.restitution

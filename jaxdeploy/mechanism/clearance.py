@@ -38,39 +38,39 @@ at rest, and inside |e| ≲ ε (where n shrinks to 0) they are regularised on th
 
 Memory (only for laws that need the impact velocity v⁻): `in_contact`, `impact_velocity`,
 `eccentricity` and `eccentricity_rate` (e, ė at the last step's end), `penetration`,
-`penetration_rate` and `event_fraction`, updated after each accepted step. v⁻ is the **largest
-approach speed of the current contact**, a continuous-time definition that no step sequence
-changes:
+`penetration_rate` and `event_fraction`, updated after each accepted step. What v⁻ is, is the
+joint's `impact_velocity_rule`:
 
-    v⁻(t) = max_{s ∈ [t_on, t]} δ̇(s),      t_on = the onset (δ crosses the law's onset upward)
+* `"onset"` (default; the classical rule of Lankarani & Nikravesh 1990, used by Flores &
+  Ambrósio 2004 for the clearance joint): v⁻ = δ̇(t_on), the approach speed at the onset of the
+  current contact, held until separation. Between step ends, a state that has penetrated while
+  the memory is still out of contact (the stages of the step that crosses the onset) uses its
+  own δ̇, so the damping ratio there is χ at most.
+* `"running_max"`: v⁻(t) = max_{s ∈ [t_on, t]} δ̇(s), the largest approach speed of the current
+  contact, and the law sees `max(v⁻, δ̇)`. It differs from `onset` only when the approach keeps
+  speeding up after onset — a contact driven in by the mechanism, or one that starts at rest — and
+  then keeps the damping ratio χ δ̇/v⁻ ≤ χ, so the rebound is calibrated to the speed actually
+  reached. This rule is not from the literature; it is an option for such contacts.
 
-and the damping law sees `max(v⁻, δ̇)`, the running maximum including the present state. The far
-side shares the joint's v⁻ (one contact episode, whichever wall) and sees `max(v⁻, δ̇')`: its
-damping ratio χ δ̇'/max(v⁻, δ̇') is ≤ χ too, and the net force is the same function of the state
-on either side of e = 0, where near and far swap. In an
-ordinary impact the approach decelerates from onset, so v⁻ = δ̇(t_on), the onset speed of
-Lankarani & Nikravesh (1990) and Flores & Ambrósio (2010). When the approach keeps speeding up
-after onset (a contact driven in by the mechanism, or one that starts at rest: a centred
-journal already past a rough law's onset, σ ≳ c/3, has δ̇ = 0 at t = 0), v⁻ follows it, so the
-damping ratio χ δ̇/v⁻ stays ≤ χ while approaching and the rebound is calibrated to the speed
-actually reached (a v⁻ held at its onset value 0 gave a damping term thousands of times too
-large and captured a 10 m/s impact).
+With both rules a contact that begins at rest has v⁻ ≈ 0, and the law divides by its
+`impact_velocity_floor` instead (`jaxdeploy.contact.damping`). The far side shares the joint's v⁻
+(one contact episode, whichever wall).
 
 Discretely, after each accepted step e(t) is the cubic Hermite interpolant of the step's end
 values (e, ė), and δ(t) = |e(t)|_ε − c, δ̇ = ė·e/|e|_ε on it (`_step_eccentricity`; not a
 Hermite of δ itself, which has a kink at the bearing's centre where δ̇ jumps from −|ė| to +|ė|:
 a step holding both the centre passage and a far-side onset then overestimated v⁻ by 46 %).
 The onset is located on it (where taking δ̇ at the step's start would be an O(h) error) and the
-running maximum includes the interpolant's maximum inside the step (an interior peak missed
-between step ends would be O(h²)). For a smooth e(t) these are O(h⁴)-accurate, but inside a
-step that crosses a Hertz onset δ(t) carries a (t − t_on)^3.5 term that no cubic follows, and
-at an interior peak the force's dependence on max(v⁻, δ̇) has a kink: the interpolated v⁻
-errs by an amount the step length sets and no error estimate sees (measured on slider_crank:
+running maximum (rule `running_max`) includes the interpolant's maximum inside the step (an
+interior peak missed between step ends would be O(h²)). For a smooth e(t) these are
+O(h⁴)-accurate, but inside a step that crosses a Hertz onset δ(t) carries a (t − t_on)^3.5
+term that no cubic follows, and at an interior peak the force's dependence on max(v⁻, δ̇) has
+a kink: the interpolated v⁻ errs by an amount the step length sets and no error estimate sees (measured on slider_crank:
 a tighter tolerance stopped improving the solution at ~1e-6 of c).
 So the memory also records `event_fraction`, where in the step the onset, a v⁻-raising peak
-or the separation (where v⁻ resets) fell, and adaptive runs redo such a step to end just past
-the event (`jaxdeploy.solvers.LocateEvents`): v⁻ is then taken where the interpolant is exact
-to round-off, and the reset happens where the contact ends.
+(rule `running_max` only) or the separation (where v⁻ resets) fell, and adaptive runs redo such
+a step to end just past the event (`jaxdeploy.solvers.LocateEvents`): v⁻ is then taken where
+the interpolant is exact to round-off, and the reset happens where the contact ends.
 "In contact" means δ beyond the elastic law's onset (0 for Hertz, about (s0 − 3)σ for the rough
 law).
 """
@@ -86,6 +86,8 @@ from ._step_eccentricity import StepEccentricity
 from .bodies import Kinematics, perp
 from .element import AbstractElement, Wrench
 from .joints import PointRef, Revolute
+
+IMPACT_VELOCITY_RULES = ("onset", "running_max")
 
 
 class ClearanceGeometry:
@@ -146,6 +148,8 @@ class RevoluteClearance(AbstractElement):
     - `normal`: a normal contact law from `jaxdeploy.contact` (e.g. `LankaraniNikravesh`).
     - `friction`: a friction law from `jaxdeploy.contact`, or `None` (frictionless).
     - `eccentricity_smoothing`: ε [m] in |e| = sqrt(e·e + ε²).
+    - `impact_velocity_rule`: `"onset"` (classical, default) or `"running_max"` — what the
+      damping law's impact velocity v⁻ is (module docstring).
     """
 
     bearing_body: str = static()
@@ -157,8 +161,14 @@ class RevoluteClearance(AbstractElement):
     normal: object
     friction: object = None
     eccentricity_smoothing: float = param(default=1e-12)
+    impact_velocity_rule: str = static(default="onset")
 
     def __check_init__(self):
+        if self.impact_velocity_rule not in IMPACT_VELOCITY_RULES:
+            raise ValueError(
+                f"impact_velocity_rule = {self.impact_velocity_rule!r} is invalid; valid: "
+                + ", ".join(IMPACT_VELOCITY_RULES)
+            )
         check_positive("clearance", self.clearance, "m")
         check_positive("journal_radius", self.journal_radius, "m")
         # ε = 0 would make |e| = sqrt(e·e) non-differentiable (NaN gradient) at e = 0, where
@@ -223,6 +233,10 @@ class RevoluteClearance(AbstractElement):
             # A contact that began inside this step counts from its onset, located on the step.
             s_on = jnp.where(was_in, 0.0, path.crossing(onset))
             held = jnp.where(was_in, memory["impact_velocity"], 0.0)
+            if self.impact_velocity_rule == "onset":
+                # v⁻ = δ̇ at the onset, held; the onset is the only event inside a contact.
+                v_minus = jnp.where(was_in, held, path.rate(s_on))
+                return v_minus, jnp.where(was_in, 1.0, s_on)
             running_max = jnp.maximum(held, path.max_rate(s_on))
             # Events that set v⁻ inside the step, for adaptive runs to end a step on
             # (`event_fraction`): the onset, and an interior peak of δ̇ that raised v⁻ (a
@@ -267,8 +281,7 @@ class RevoluteClearance(AbstractElement):
         g = self.geometry(kin)
         delta = jnp.stack([g.penetration, g.far_penetration])
         rate = jnp.stack([g.penetration_rate, g.far_penetration_rate])
-        # The running maximum of the approach speed includes the present state (docstring).
-        v_minus = None if memory is None else jnp.maximum(memory["impact_velocity"], rate)
+        v_minus = None if memory is None else self._impact_velocity(memory, rate)
         fn = self.normal.force(delta, rate, v_minus)
         if self.friction is None:
             ft = jnp.zeros_like(fn)
@@ -276,6 +289,15 @@ class RevoluteClearance(AbstractElement):
             sliding = jnp.stack([g.sliding_velocity, g.far_sliding_velocity])
             ft = self.friction.force(sliding, fn)
         return fn, ft, g
+
+    def _impact_velocity(self, memory, rate):
+        """v⁻ seen by the damping law at a state with penetration rates `rate` [near, far]."""
+        if self.impact_velocity_rule == "onset":
+            # Out of contact in memory but penetrating here: inside the step that crosses the
+            # onset, where the state's own δ̇ is the best estimate of the onset speed.
+            return jnp.where(memory["in_contact"] > 0.5, memory["impact_velocity"], rate)
+        # The running maximum of the approach speed includes the present state (docstring).
+        return jnp.maximum(memory["impact_velocity"], rate)
 
     def contact_forces(self, kin: Kinematics, memory):
         """`(F_N, F_T, geometry)` at state `kin`: the net normal force on the journal along

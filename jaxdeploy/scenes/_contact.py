@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 from .. import contact
-from .base import is_exactly_zero
+from ..contact.damping import DEFAULT_IMPACT_VELOCITY_FLOOR
+from ..mechanism.clearance import IMPACT_VELOCITY_RULES
+from .base import ParamSpec, is_exactly_zero
 
 NORMAL_LAWS = {
     "hunt_crossley": contact.HuntCrossley,
@@ -12,6 +14,37 @@ NORMAL_LAWS = {
     "gonthier": contact.Gonthier,
     "hu_guo": contact.HuGuo,
 }
+
+
+FRICTION_SHAPES = ("algebraic", "tanh")
+
+# Parameters every scene with clearance joints shares: the constants of the contact laws that a
+# reference implementation must match (so they are parameters, with units, not hidden constants).
+IMPACT_VELOCITY_FLOOR_SPEC = ParamSpec(
+    DEFAULT_IMPACT_VELOCITY_FLOOR,
+    0,
+    10,
+    "m/s",
+    "smallest impact velocity v⁻ the damping term divides by",
+    False,
+)
+SLIP_VELOCITY_SPEC = ParamSpec(
+    1e-3, 0, 10, "m/s", "friction regularisation velocity v_s (sign(v) ≈ v/v_s below it)", False
+)
+
+
+def check_choice(name: str, value: str, valid) -> str:
+    """`value` if it is one of `valid`; else a ValueError naming the option and the choices."""
+    if value not in valid:
+        raise ValueError(f"{name} = {value!r} is invalid; valid: {', '.join(valid)}")
+    return value
+
+
+def check_contact_options(normal_law: str, impact_velocity_rule: str, friction_shape: str):
+    """Refuse unknown scene options before anything is built."""
+    check_choice("normal_law", normal_law, sorted(NORMAL_LAWS))
+    check_choice("impact_velocity_rule", impact_velocity_rule, IMPACT_VELOCITY_RULES)
+    check_choice("friction_shape", friction_shape, FRICTION_SHAPES)
 
 
 def clearance_contact_laws(
@@ -25,7 +58,9 @@ def clearance_contact_laws(
     friction_coefficient,
     normal_law: str = "lankarani_nikravesh",
     slip_velocity=1e-3,
+    friction_shape: str = "algebraic",
     roughness_offset=0.0,
+    impact_velocity_floor=DEFAULT_IMPACT_VELOCITY_FLOOR,
 ):
     """Normal and friction laws for a journal in a bearing of the same material.
 
@@ -46,10 +81,14 @@ def clearance_contact_laws(
         elastic = contact.HertzElastic(stiffness)
     else:
         elastic = contact.RoughElastic(stiffness, sigma, offset=roughness_offset)
-    normal = NORMAL_LAWS[normal_law](elastic=elastic, restitution=restitution)
+    normal = NORMAL_LAWS[normal_law](
+        elastic=elastic, restitution=restitution, impact_velocity_floor=impact_velocity_floor
+    )
     friction = (
         None
         if is_exactly_zero(friction_coefficient)
-        else contact.SmoothCoulomb(mu=friction_coefficient, slip_velocity=slip_velocity)
+        else contact.SmoothCoulomb(
+            mu=friction_coefficient, slip_velocity=slip_velocity, shape=friction_shape
+        )
     )
     return normal, friction

@@ -45,6 +45,11 @@ class Scene(abc.ABC):
     default_t_end: ClassVar[float]
     default_control: ClassVar[dict]
 
+    @property
+    def options(self) -> dict:
+        """The scene's options (its constructor's keyword arguments), as recorded in results."""
+        return {}
+
     def default_params(self) -> dict[str, float]:
         return {k: spec.default for k, spec in self.params.items()}
 

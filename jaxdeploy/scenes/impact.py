@@ -17,7 +17,8 @@ import jax.numpy as jnp
 
 from .. import contact
 from ..mechanism import Body, Mechanism, RevoluteClearance, consistent_state
-from ._contact import NORMAL_LAWS
+from ..mechanism.clearance import IMPACT_VELOCITY_RULES
+from ._contact import IMPACT_VELOCITY_FLOOR_SPEC, NORMAL_LAWS, check_choice
 from .base import ParamSpec, Scene, is_exactly_zero
 
 INF = math.inf
@@ -37,15 +38,20 @@ class Impact(Scene):
         "sigma": ParamSpec(0.0, 0, 1e-4, "m", "RMS roughness σ (0: Hertz)"),
         "restitution": ParamSpec(0.9, 0, 1, "", "coefficient of restitution", False),
         "material_damping": ParamSpec(0.0, 0, INF, "s/m", "α of the memoryless law"),
+        "impact_velocity_floor": IMPACT_VELOCITY_FLOOR_SPEC,
     }
     default_t_end = 6e-4  # first touch at c/v0 = 1e-4 s; Hertz contact lasts ~3.2e-4 s
     default_control = {"rtol": 1e-8, "atol": 1e-13, "dt_max": 1e-6}
 
-    def __init__(self, damping: str = "none"):
-        valid = {"none", "hunt_crossley_material", *NORMAL_LAWS}
-        if damping not in valid:
-            raise ValueError(f"damping = {damping!r} is invalid; valid: {sorted(valid)}")
+    def __init__(self, damping: str = "none", impact_velocity_rule: str = "onset"):
+        check_choice("damping", damping, sorted({"none", "hunt_crossley_material", *NORMAL_LAWS}))
+        check_choice("impact_velocity_rule", impact_velocity_rule, IMPACT_VELOCITY_RULES)
         self.damping = damping
+        self.impact_velocity_rule = impact_velocity_rule
+
+    @property
+    def options(self) -> dict:
+        return {"damping": self.damping, "impact_velocity_rule": self.impact_velocity_rule}
 
     def normal_law(self, params):
         if is_exactly_zero(params["sigma"]):
@@ -56,7 +62,11 @@ class Impact(Scene):
             return contact.Undamped(elastic)
         if self.damping == "hunt_crossley_material":
             return contact.HuntCrossleyMaterial(elastic, params["material_damping"])
-        return NORMAL_LAWS[self.damping](elastic=elastic, restitution=params["restitution"])
+        return NORMAL_LAWS[self.damping](
+            elastic=elastic,
+            restitution=params["restitution"],
+            impact_velocity_floor=params["impact_velocity_floor"],
+        )
 
     def build(self, params):
         r = params["journal_radius"]
@@ -69,6 +79,7 @@ class Impact(Scene):
             clearance=params["clearance"],
             journal_radius=r,
             normal=self.normal_law(params),
+            impact_velocity_rule=self.impact_velocity_rule,
         )
         return Mechanism([journal], [joint], ground_points={"B": (0.0, 0.0)})
 

@@ -32,7 +32,12 @@ from ..mechanism import (
     RevoluteClearance,
     consistent_state,
 )
-from ._contact import clearance_contact_laws
+from ._contact import (
+    IMPACT_VELOCITY_FLOOR_SPEC,
+    SLIP_VELOCITY_SPEC,
+    check_contact_options,
+    clearance_contact_laws,
+)
 from .base import ParamSpec, Scene, is_exactly_zero
 
 INF = math.inf
@@ -61,13 +66,33 @@ class SliderCrank(Scene):
         "restitution": ParamSpec(0.9, 0, 1, "", "coefficient of restitution c_e", False),
         "friction_coefficient": ParamSpec(0.0, 0, 2, "", "friction μ (0: no friction traced)"),
         "gravity": ParamSpec(9.81, 0, 1e3, "m/s^2", "gravity (−y)"),
+        "impact_velocity_floor": IMPACT_VELOCITY_FLOOR_SPEC,
+        "friction_slip_velocity": SLIP_VELOCITY_SPEC,
     }
     default_t_end = 2.0 * 2.0 * math.pi / (5000 * RPM)  # two revolutions
     default_control = {"rtol": 1e-6, "atol": 1e-9, "dt_max": 1e-4}
 
-    def __init__(self, ideal: bool = False, normal_law: str = "lankarani_nikravesh"):
+    def __init__(
+        self,
+        ideal: bool = False,
+        normal_law: str = "lankarani_nikravesh",
+        impact_velocity_rule: str = "onset",
+        friction_shape: str = "algebraic",
+    ):
+        check_contact_options(normal_law, impact_velocity_rule, friction_shape)
         self.ideal = ideal
         self.normal_law = normal_law
+        self.impact_velocity_rule = impact_velocity_rule
+        self.friction_shape = friction_shape
+
+    @property
+    def options(self) -> dict:
+        return {
+            "ideal": self.ideal,
+            "normal_law": self.normal_law,
+            "impact_velocity_rule": self.impact_velocity_rule,
+            "friction_shape": self.friction_shape,
+        }
 
     def check_params(self, params):
         """The crank must be shorter than the rod, or the mechanism locks before a revolution."""
@@ -116,6 +141,9 @@ class SliderCrank(Scene):
                 restitution=p["restitution"],
                 friction_coefficient=p["friction_coefficient"],
                 normal_law=self.normal_law,
+                slip_velocity=p["friction_slip_velocity"],
+                friction_shape=self.friction_shape,
+                impact_velocity_floor=p["impact_velocity_floor"],
             )
             elements.append(
                 RevoluteClearance(
@@ -127,6 +155,7 @@ class SliderCrank(Scene):
                     journal_radius=p["journal_radius"],
                     normal=normal,
                     friction=friction,
+                    impact_velocity_rule=self.impact_velocity_rule,
                 )
             )
         if not is_exactly_zero(p["gravity"]):
