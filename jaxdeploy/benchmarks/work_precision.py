@@ -22,7 +22,7 @@ import numpy as np
 from ..scenes import get_scene
 from ..simulation import simulate
 from ..solvers import GeneralizedAlpha, solver_by_name
-from .reference import Reference, eccentricity_error, reference_solution
+from .reference import PEER_SCENE_OPTIONS, Reference, eccentricity_error, reference_solution
 
 
 @dataclass
@@ -329,7 +329,7 @@ class _Context:
     (shared by the configurations measured in one process)."""
 
     def __init__(self, scene_name: str, reference: Reference):
-        scene = get_scene(scene_name)
+        scene = get_scene(scene_name, **PEER_SCENE_OPTIONS.get(scene_name, {}))
         self.params = reference.params
         self.mech = scene.build(self.params)
         self.s0 = scene.initial_state(self.params, self.mech)

@@ -65,8 +65,9 @@ running maximum (rule `running_max`) includes the interpolant's maximum inside t
 interior peak missed between step ends would be O(h²)). For a smooth e(t) these are
 O(h⁴)-accurate, but inside a step that crosses a Hertz onset δ(t) carries a (t − t_on)^3.5
 term that no cubic follows, and at an interior peak the force's dependence on max(v⁻, δ̇) has
-a kink: the interpolated v⁻ errs by an amount the step length sets and no error estimate sees (measured on slider_crank:
-a tighter tolerance stopped improving the solution at ~1e-6 of c).
+a kink: the interpolated v⁻ errs by an amount the step length sets and no error estimate
+sees (measured on slider_crank: a tighter tolerance stopped improving the solution at ~1e-6 of
+c).
 So the memory also records `event_fraction`, where in the step the onset, a v⁻-raising peak
 (rule `running_max` only) or the separation (where v⁻ resets) fell, and adaptive runs redo such
 a step to end just past the event (`jaxdeploy.solvers.LocateEvents`): v⁻ is then taken where
