@@ -157,13 +157,16 @@ def _peer_reference():
     import numpy as np
 
     from jaxdeploy.benchmarks.peers import SliderCrankNumpy
-    from jaxdeploy.benchmarks.reference import Reference
+    from jaxdeploy.benchmarks.reference import PEER_SCENE_OPTIONS, Reference
     from jaxdeploy.scenes import SliderCrank
 
-    scene = SliderCrank()
+    # The benchmark's rule, and the numpy model with the same one.
+    scene = SliderCrank(**PEER_SCENE_OPTIONS["slider_crank"])
     p = scene.resolve_params(None)
     s0 = scene.initial_state(p, scene.build(p))
     ts = np.linspace(0.0, 0.3e-3, 31)
-    peer = SliderCrankNumpy(p).solve(s0, ts[-1], ts, "DOP853", 1e-10, 1e-12)
+    peer = SliderCrankNumpy(p, scene.impact_velocity_rule).solve(
+        s0, ts[-1], ts, "DOP853", 1e-10, 1e-12
+    )
     evidence = [dict(solver="numpy DOP853", rtol=1e-10, window=0.0, full=0.0, steps=0)]
     return Reference("slider_crank", p, ts, peer.ys[:, :9], peer.ys[:, 9:], ts[-1], 1e-10, evidence)

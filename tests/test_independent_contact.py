@@ -24,6 +24,13 @@ from independent.impact_rough import (
     tail_energy_fraction,
     undamped_impact,
 )
+from independent.package_runs import (
+    IMPACT,
+    IMPACT_T_END,
+    IMPACT_TS,
+    impact_run,
+    return_to_centre,
+)
 from independent.slider_crank_minimal import SliderCrankMinimal
 
 from jaxdeploy import contact
@@ -35,15 +42,30 @@ from jaxdeploy.mechanism import (
     consistent_state,
 )
 from jaxdeploy.scenes import get_scene
-from jaxdeploy.scenes.impact import Impact
 from jaxdeploy.simulation import simulate
 
-# The impact scene's defaults (m = 1 kg, v0 = 1 m/s, K = 1e10 N/m^1.5, c = 0.1 mm) with a
-# roughness σ = 10 µm: δ_max moves by 0.6 % and the contact time at δ = 0 by 0.1 % from
-# Hertz, far more than the tolerances below.
-MASS, SPEED, STIFFNESS, CLEARANCE, SIGMA = 1.0, 1.0, 1e10, 1e-4, 1e-5
-T_END = 6e-4  # [s]
-TS = np.linspace(0.0, T_END, 601)
+MASS, SPEED, STIFFNESS = IMPACT["mass"], IMPACT["speed"], IMPACT["stiffness"]
+CLEARANCE, SIGMA = IMPACT["clearance"], IMPACT["sigma"]
+TS = IMPACT_TS
+# Tolerances that bring each solver's error below the checks: generalized-α is second order
+# (at rtol 1e-10 its contact time is off by 1e-7 relative; 4451 steps vs 19748 at 1e-12).
+RTOL = {"dopri8": 1e-10, "generalized_alpha": 1e-12}
+# ~10 s each (mostly compilation): the Dopri8 runs in the default suite, generalized-α slow.
+SOLVERS = [
+    "dopri8",
+    pytest.param("generalized_alpha", marks=pytest.mark.slow),
+]
+
+
+def _impact_run(damping, solver):
+    rtol = RTOL[solver]
+    return impact_run(damping, solver=solver, rtol=rtol, atol=1e-5 * rtol, dt_max=1e-6)
+
+
+def test_impact_case_is_the_scenes():
+    params = get_scene("impact").resolve_params({"sigma": SIGMA})
+    assert (params["mass"], params["impact_speed"]) == (MASS, SPEED)
+    assert (params["stiffness"], params["clearance"]) == (STIFFNESS, CLEARANCE)
 
 
 def test_gaussian_moments_two_independent_quadratures():
@@ -56,40 +78,6 @@ def test_gaussian_moments_two_independent_quadratures():
     tabulated = {-1: 1.40460, 0: 0.43002, 1: 7.5668e-2, 2: 6.6482e-3, 3: 2.6397e-4}
     for h, value in tabulated.items():
         assert gaussian_moment(1.5, h) == pytest.approx(value, rel=5e-5)
-
-
-# Tolerances that bring each solver's error below the checks: generalized-α is second order
-# (at rtol 1e-10 its contact time is off by 1e-7 relative; 4451 steps vs 19748 at 1e-12).
-RTOL = {"dopri8": 1e-10, "generalized_alpha": 1e-12}
-# ~10 s each (mostly compilation): the Dopri8 runs in the default suite, generalized-α slow.
-SOLVERS = [
-    "dopri8",
-    pytest.param("generalized_alpha", marks=pytest.mark.slow),
-]
-
-
-def _impact_run(damping, solver):
-    scene = Impact(damping=damping)
-    params = scene.resolve_params({"sigma": SIGMA})
-    mech = scene.build(params)
-    run = simulate(
-        mech,
-        scene.initial_state(params, mech),
-        T_END,
-        ts=TS,
-        solver=solver,
-        rtol=RTOL[solver],
-        atol=1e-5 * RTOL[solver],
-        dt_max=1e-6,
-    )
-    assert run.ok, run.status()
-    return np.asarray(run.q)[:, 0], np.asarray(run.v)[:, 0]
-
-
-def _return_speed(x, v):
-    """|ẋ| where the journal is back at the bearing's centre (the rebound speed)."""
-    (t_back,) = level_crossings(TS[1:], x[1:], v[1:], 0.0)
-    return t_back, abs(np.interp(t_back, TS, v))
 
 
 @pytest.mark.parametrize("solver", SOLVERS)
@@ -111,7 +99,7 @@ def test_rough_undamped_impact_matches_energy_quadrature(solver):
     for level in levels:
         t_in, t_out = level_crossings(TS, x, v, CLEARANCE + level)
         assert t_out - t_in == pytest.approx(durations[level], rel=1e-8), level
-    t_back, speed = _return_speed(x, v)
+    t_back, speed = return_to_centre(x, v)
     assert speed == pytest.approx(SPEED, rel=1e-8)
     assert t_back == pytest.approx(ode.return_time, rel=1e-8)
     before = TS <= ode.return_time
@@ -133,7 +121,7 @@ def test_rough_lankarani_nikravesh_impact_matches_ode_reference(solver):
     tail = (1.0 + chi) * tail_energy_fraction(MASS, SPEED, wall)
     assert 1e-7 < tail < 1e-6
     x, v = _impact_run("lankarani_nikravesh", solver)
-    _, speed = _return_speed(x, v)
+    _, speed = return_to_centre(x, v)
     assert speed == pytest.approx(ref.rebound_speed, rel=tail)
     assert abs(ref.rebound_speed - restitution * SPEED) > 1e-3  # the law, not c_e itself
     t_in, t_out = level_crossings(TS, x, v, CLEARANCE - 3.0 * SIGMA)
@@ -141,7 +129,7 @@ def test_rough_lankarani_nikravesh_impact_matches_ode_reference(solver):
     assert t_out - t_in == pytest.approx(ref.separation_time - ref.onset_time, rel=tail)
     before = TS <= ref.separation_time
     # A speed difference ≤ tail · v0 held for the whole run bounds the path difference.
-    assert np.max(np.abs(x[before] - ref.sample(TS[before])[:, 0])) < tail * SPEED * T_END
+    assert np.max(np.abs(x[before] - ref.sample(TS[before])[:, 0])) < tail * SPEED * IMPACT_T_END
 
 
 def test_spinning_journal_friction_circle_closed_form():

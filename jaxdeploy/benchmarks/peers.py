@@ -1,8 +1,7 @@
 """Peers for the work–precision benchmark: scipy `solve_ivp` on the slider-crank.
 
 Two right-hand sides of the *same* model (absolute coordinates, index-1 with Baumgarte
-stabilisation, Hertz contact with Lankarani–Nikravesh damping, v⁻ = the largest approach speed
-of the current contact, `jaxdeploy.mechanism.clearance`):
+stabilisation, Hertz contact with Lankarani–Nikravesh damping, `jaxdeploy.mechanism.clearance`):
 
 * `SliderCrankNumpy`: written the way a scipy user would (Flores & Ambrósio 2004; Nikravesh
   1988): hand-derived constraint Jacobian and `γ`, numpy arrays, `numpy.linalg.solve`. It
@@ -10,11 +9,14 @@ of the current contact, `jaxdeploy.mechanism.clearance`):
 * `jitted_rhs(mechanism)`: jaxdeploy's own index-1 field, jitted, called from scipy — the same
   integrator on a cheaper or dearer function call tells integrator quality from call cost.
 
-v⁻ is kept exactly by events, as a scipy user would keep a memory variable: contact onset
-(δ = 0 crossing upward) stops the integration and sets v⁻ = δ̇ there; while the approach
-speeds up beyond v⁻ the force uses `max(v⁻, δ̇)` (the running maximum), and its peak (δ̈ = 0
-crossing downward) stops the integration and sets v⁻ = δ̇ there. jaxdeploy's step-wise memory
-(onset interpolated inside the step, maximum sampled at step ends) converges to this at O(h²).
+v⁻ is kept exactly by events, as a scipy user would keep a memory variable. With the classical
+rule (`impact_velocity_rule="onset"`, the default; Lankarani & Nikravesh 1990, Flores &
+Ambrósio 2004) contact onset (δ = 0 crossing upward) stops the integration and sets v⁻ = δ̇
+there, held until separation (δ = 0 crossing downward) stops it again. With
+`"running_max"` (jaxdeploy's other rule, not from the literature) the force uses `max(v⁻, δ̇)`
+while the approach speeds up beyond v⁻, and its peak (δ̈ = 0 crossing downward) is a third
+event that sets v⁻ = δ̇ there. The damping term divides by `max(v⁻, v_floor)`, v_floor the
+scene's `impact_velocity_floor` [m/s].
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 BAUMGARTE = 5.0  # α = β = 5 s⁻¹ as used by Flores & Ambrósio (2004) (recalled, unverified)
-VELOCITY_FLOOR = 1e-4  # m/s, as jaxdeploy.contact.damping (the same model)
+IMPACT_VELOCITY_RULES = ("onset", "running_max")
 
 
 def _rot(theta):
@@ -48,11 +50,20 @@ class SliderCrankNumpy:
     State `y = (q, q̇)`, `q = (x₁, y₁, θ₁, x₂, y₂, θ₂, x₃, y₃, θ₃)` for crank, rod, slider
     (centres of mass). Seven constraints: ground–crank pin (2), crank angle `θ₁ = ω t` (1),
     crank–rod pin (2), slider `θ₃ = 0`, `y₃ = 0` (2). Index-1 system
-    `[[M, Φ_qᵀ], [Φ_q, 0]] [q̈; λ] = [Q; γ − 2α Φ̇ − β² Φ]`.
+    `[[M, Φ_qᵀ], [Φ_q, 0]] [q̈; λ] = [Q; γ − 2α Φ̇ − β² Φ]`. `impact_velocity_rule`: what v⁻
+    is (module docstring), `"onset"` (classical, default) or `"running_max"`.
     """
 
-    def __init__(self, params: dict):
+    def __init__(self, params: dict, impact_velocity_rule: str = "onset"):
+        if impact_velocity_rule not in IMPACT_VELOCITY_RULES:
+            raise ValueError(
+                f"impact_velocity_rule = {impact_velocity_rule!r} is invalid; valid: "
+                + ", ".join(IMPACT_VELOCITY_RULES)
+            )
+        self.impact_velocity_rule = impact_velocity_rule
         p = {k: float(v) for k, v in params.items()}
+        # The scene's parameter (m/s); 1e-4 is its default.
+        self.velocity_floor = p.get("impact_velocity_floor", 1e-4)
         self.r, self.l = p["crank_length"], p["rod_length"]
         self.omega = p["crank_speed"]
         self.g = p["gravity"]
@@ -114,6 +125,7 @@ class SliderCrankNumpy:
             method,
             rtol,
             atol,
+            running_max=self.impact_velocity_rule == "running_max",
         )
 
     def penetration_acceleration(self, t, y, v_minus):
@@ -137,8 +149,9 @@ class SliderCrankNumpy:
         f[[1, 4, 7]] = -self.mass[[0, 3, 6]] * self.g
         delta, rate, n, qj, qi = self.contact_kinematics(q, v)
         if delta > 0.0:
-            v_running = max(v_minus, rate)  # running maximum of the approach speed
-            v_eff = math.sqrt(v_running**2 + VELOCITY_FLOOR**2)
+            if self.impact_velocity_rule == "running_max":
+                v_minus = max(v_minus, rate)  # the running maximum includes the present state
+            v_eff = max(v_minus, self.velocity_floor)
             fn = max(0.0, self.K * delta**1.5 * (1.0 + self.chi * rate / v_eff))
             fj = -fn * n
             f[3:5] += fj
@@ -271,13 +284,14 @@ def solve_with_onset_events(
     rtol,
     atol,
     max_restarts=10_000,
+    running_max=False,
 ) -> PeerRun:
-    """`scipy.integrate.solve_ivp` from event to event, keeping v⁻ (the running maximum of the
-    approach speed over the current contact) exactly:
+    """`scipy.integrate.solve_ivp` from event to event, keeping v⁻ exactly:
 
     * onset, δ = 0 rising (armed out of contact): v⁻ = δ̇ there;
-    * peak of the approach, δ̈ = 0 falling while in contact with δ̇ above v⁻ (between the two
-      the right-hand side's `max(v⁻, δ̇)` *is* the running maximum): v⁻ = δ̇ there;
+    * with `running_max` only, the peak of the approach, δ̈ = 0 falling while in contact with
+      δ̇ above v⁻ (between the two the right-hand side's `max(v⁻, δ̇)` *is* the running
+      maximum): v⁻ = δ̇ there;
     * separation, δ = 0 falling (armed in contact): the contact ends, the onset is re-armed.
 
     Each event stops the integration, updates v⁻ and restarts. Returns the states at `ts`
@@ -299,7 +313,7 @@ def solve_with_onset_events(
         return penetration(t, y) if in_contact[0] else 1.0
 
     def peak(t, y, v_minus):
-        if in_contact[0] and penetration_rate(y) > v_minus + 1e-12:
+        if running_max and in_contact[0] and penetration_rate(y) > v_minus + 1e-12:
             return penetration_acceleration(t, y, v_minus)
         return 1.0
 

@@ -333,6 +333,8 @@ class _Context:
         self.params = reference.params
         self.mech = scene.build(self.params)
         self.s0 = scene.initial_state(self.params, self.mech)
+        # The numpy peer models the same rule as the scene (only slider_crank has the peer).
+        self.impact_velocity_rule = getattr(scene, "impact_velocity_rule", "onset")
         self.reference = reference
         self.ts = reference.ts
         self.t_end = float(self.ts[-1])
@@ -360,7 +362,7 @@ class _Context:
             from .peers import SliderCrankNumpy, jitted_rhs
 
             if cfg.kind == "scipy-numpy":
-                m = SliderCrankNumpy(self.params)
+                m = SliderCrankNumpy(self.params, self.impact_velocity_rule)
                 self.models[cfg.kind] = (
                     m.rhs,
                     m.penetration,

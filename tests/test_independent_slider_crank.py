@@ -1,0 +1,138 @@
+"""slider_crank against the independent minimal-coordinate reference (issue 19 item 3).
+
+The reference (`tests/independent/slider_crank_minimal.py`: rod angle and slider position as
+coordinates, Lagrange's equations, classical Lankarani–Nikravesh rule with every onset and
+separation located by scipy events) shares no code and no modelling shortcut with the package
+(absolute coordinates, constraint solves, a two-sided clearance joint, step-wise memory). Its
+trajectories are stored in `tests/data/slider_crank_reference.npz` (`cd tests && python -m
+independent.generate`; the file's `meta` says how converged they are).
+
+Checks: the slider position x_s over the first 4 ms (1 µs grid), and over two revolutions the
+number of impacts and their onset times (`independent.package_runs.slider_crank_run`).
+"""
+
+import json
+
+import numpy as np
+import pytest
+from independent import generate
+from independent.package_runs import TWO_REVOLUTIONS, slider_crank_run, slider_crank_scene
+from independent.slider_crank_minimal import PARAMETERS
+
+CASES = {"mu0": 0.0, "mu0.01": 0.01}
+
+
+@pytest.fixture(scope="module")
+def reference():
+    with np.load(generate.PATH) as data:
+        return {k: np.array(data[k]) for k in data.files}
+
+
+def test_reference_fixture_is_converged(reference):
+    """The stored runs agree with their check runs (DOP853 at 10× the tolerance, Radau) far
+    below what the package is asked to reach, and on the saved grids the tests use."""
+    meta = json.loads(str(reference["meta"]))
+    for case in CASES:
+        for check in meta["cases"][case]["checks"]:
+            n_ref, n_check = check["n_onsets"]
+            assert n_ref == n_check, check
+            assert check["onsets_s"] < 1e-8 and check["x_s_4ms_m"] < 1e-12, check
+        assert meta["cases"][case]["n_tensile_events"] == 0  # the max(0, ·) guard never acted
+    assert reference["mu0_onsets"].size == 26 and reference["mu0.01_onsets"].size == 43
+    np.testing.assert_array_equal(reference["fine_ts"], generate.FINE_TS)
+    assert meta["t_end_s"] == pytest.approx(TWO_REVOLUTIONS, rel=1e-15)
+
+
+def test_reference_case_is_the_scenes():
+    """The reference's parameters are the scene's defaults (the friction case: μ, v_s)."""
+    for case, mu in CASES.items():
+        _, params = slider_crank_scene(mu)
+        for name, value in generate.CASES[case]["params"].items():
+            assert params[name] == value, name
+        for name, value in PARAMETERS.items():
+            if name not in generate.CASES[case]["params"]:
+                assert params[name] == pytest.approx(value, rel=1e-15), name
+
+
+def test_default_tolerance_within_1e5_m_over_4ms(reference):
+    """The scene's default step control (rtol 1e-6, atol 1e-9, dt_max 0.1 ms) on the default
+    solver: x_s within 1e-5 m (2 % of c) of the reference over the first 4 ms."""
+    scene, _ = slider_crank_scene(0.0)
+    _, x_s, _, _ = slider_crank_run(0.0, 4e-3, **scene.default_control)
+    error = np.max(np.abs(x_s - reference["mu0_fine"][:, 1]))
+    assert error < 1e-5, error
+
+
+TIGHT = {"rtol": 1e-10, "atol": 1e-13}
+# Measured: generalized-α at rtol 1e-10, atol 1e-13 stops advancing at t = 12.02 ms, inside the
+# 4 ms contact that begins at 11.745 ms with v⁻ = 0.087 m/s (100k, 200k and 400k steps all end
+# there); over the first 4 ms it reaches 9.3e-9 m (32k steps). Kept as a strict xfail so that
+# the target is not dropped silently.
+GENERALIZED_ALPHA_STALLS = pytest.mark.xfail(
+    strict=True,
+    raises=RuntimeError,
+    reason="generalized-α's step size collapses at t = 12.02 ms (rtol 1e-10)",
+)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "solver",
+    ["tsit5", pytest.param("generalized_alpha", marks=GENERALIZED_ALPHA_STALLS)],
+)
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_tight_tolerance_matches_reference_over_two_revolutions(reference, case, solver):
+    """At rtol 1e-10, atol 1e-13: x_s within 1e-8 m over the first 4 ms; over two revolutions
+    the same number of impacts, each onset within 1e-7 s."""
+    ts, x_s, found, _ = slider_crank_run(
+        CASES[case], TWO_REVOLUTIONS, solver=solver, max_steps=400_000, **TIGHT
+    )
+    first = ts <= generate.FINE_TS[-1] + 1e-12
+    error = np.max(np.abs(x_s[first] - reference[f"{case}_fine"][:, 1]))
+    assert error < 1e-8, error
+    expected = reference[f"{case}_onsets"]
+    assert found.size == expected.size, (found, expected)
+    assert np.max(np.abs(found - expected)) < 1e-7, np.abs(found - expected)
+
+
+@pytest.mark.slow
+def test_tight_generalized_alpha_over_4ms(reference):
+    """generalized-α at rtol 1e-10, atol 1e-13 over the first 4 ms (11 impacts): x_s within
+    1e-8 m, the same onsets within 1e-7 s."""
+    ts, x_s, found, _ = slider_crank_run(0.0, 4e-3, solver="generalized_alpha", **TIGHT)
+    error = np.max(np.abs(x_s - reference["mu0_fine"][:, 1]))
+    assert error < 1e-8, error
+    expected = reference["mu0_onsets"][reference["mu0_onsets"] <= 4e-3]
+    assert found.size == expected.size, (found, expected)
+    assert np.max(np.abs(found - expected)) < 1e-7, np.abs(found - expected)
+
+
+@pytest.mark.slow
+def test_stored_fixture_is_what_the_generator_writes(reference):
+    """Regenerating the frictionless run (~10 s) reproduces the stored arrays (to round-off
+    of another numpy/scipy build)."""
+    _, solution = generate.run_case("mu0")
+    fresh = generate.arrays(solution)
+    np.testing.assert_allclose(fresh["onsets"], reference["mu0_onsets"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(fresh["fine"], reference["mu0_fine"], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(fresh["coarse"], reference["mu0_coarse"], rtol=0, atol=1e-10)
+
+
+def test_numpy_peer_with_the_classical_rule_matches_reference(reference):
+    """The benchmark's numpy peer (absolute coordinates, Baumgarte-stabilised index-1 system,
+    `jaxdeploy.benchmarks.peers`) with its default classical rule and the minimal-coordinate
+    reference are two formulations of one model: x_s agrees to 1e-12 m over the first 2 ms
+    (five impacts; measured 5e-14 m)."""
+    from jaxdeploy.benchmarks.peers import SliderCrankNumpy
+
+    scene, params = slider_crank_scene(0.0)
+    state = scene.initial_state(params, scene.build(params))
+    ts = generate.FINE_TS[generate.FINE_TS <= 2e-3 + 1e-12]
+    peer = SliderCrankNumpy(params).solve(state, ts[-1], ts, "DOP853", 1e-12, 1e-14)
+    assert peer.ok, peer.message
+    kinds = [kind for _, kind, _ in peer.events]
+    assert set(kinds) == {"onset", "separation"}  # no peak events with the classical rule
+    onsets = [t for t, kind, _ in peer.events if kind == "onset"]
+    np.testing.assert_allclose(onsets, reference["mu0_onsets"][: len(onsets)], rtol=0, atol=1e-12)
+    error = np.max(np.abs(peer.ys[:, 6] - reference["mu0_fine"][: ts.size, 1]))
+    assert error < 1e-12, error
