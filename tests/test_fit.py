@@ -172,7 +172,7 @@ def test_malformed_files_and_specs_are_refused(tmp_path, capsys):
     np.savez(tmp_path / "s.npz", t=[0.0, 1.0], y=np.array(["a", "b"]))
     with pytest.raises(MeasurementError, match="'y' is not numeric"):
         load_measurements(str(tmp_path / "s.npz"))
-    scene = Impact()
+    scene = Impact(damping="lankarani_nikravesh")  # restitution counts (not with "none")
     with pytest.raises(ValueError, match="unknown parameter 'stifness'"):
         make_parameters(scene, ["stifness=1e10"])
     with pytest.raises(ValueError, match=r"restitution = 1.5 \(initial guess\) is invalid"):

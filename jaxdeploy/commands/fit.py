@@ -1,6 +1,18 @@
 """`jaxdeploy fit DATA --scene S --params NAME[=guess[:low:high]] ... --out DIR`: fit scene
 parameters to measured channels; write estimates with standard errors and correlations, the
-loss history and data-against-model plots."""
+adequacy verdict (does the model explain the data?), the loss history and plots.
+
+Exit status (docs/identification.md):
+
+* 0 — the optimiser converged and the model explains the data (χ²/dof consistent with the
+  stated noise, white residuals);
+* 1 — the fit could not run (the model cannot be simulated at the start points);
+* 2 — refused input (bad data file, parameter, option or output folder);
+* 3 — the model does NOT explain the data (χ²/dof far above 1 or residuals not white): the
+  estimates and their standard errors are not to be trusted, whether or not it converged;
+* 4 — the model explains the data but the optimiser stopped before its criterion was met
+  (e.g. --max-iterations reached): the estimates may still move.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +21,7 @@ import sys
 from . import SCENE_OPTION_HELP, parse_pairs
 
 NAME = "fit"
+EXIT_OK, EXIT_FAILED, EXIT_REFUSED, EXIT_INADEQUATE, EXIT_NOT_CONVERGED = 0, 1, 2, 3, 4
 HELP = "fit scene parameters to measured channels (CSV/npz), with uncertainties"
 
 
@@ -75,9 +88,11 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument(
         "--horizons",
-        default=None,
-        metavar="T1,T2,...",
-        help="continuation: fit up to T1, then T2, ... (each from the last)",
+        default="auto",
+        metavar="T1,T2,...|auto|none",
+        help="continuation: fit up to T1, then T2, ... (each from the last); auto (default): "
+        "through the 4th, 8th, 16th, ... impact of the model at the start, then the whole "
+        "record (none without impacts or with --window)",
     )
     parser.add_argument("--max-iterations", type=int, default=30)
     parser.add_argument(
@@ -89,7 +104,13 @@ def add_arguments(parser) -> None:
         "batch) and start from the best (default 0: start from the guess)",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of the --starts sample")
-    parser.add_argument("--rtol", type=float, default=None, help="model step control")
+    parser.add_argument(
+        "--rtol",
+        type=float,
+        default=None,
+        help="model step control (default: chosen at the start point so that the model's "
+        "error is below 0.2 noise levels RMS; needs stated noise levels)",
+    )
     parser.add_argument("--atol", type=float, default=None)
     parser.add_argument("--dt-max", type=float, default=None)
     parser.add_argument(
@@ -102,9 +123,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
-def _fail(message: str) -> int:
+def _fail(message: str, code: int = EXIT_REFUSED) -> int:
     print(f"error: {message}", file=sys.stderr)
-    return 2
+    return code
 
 
 def _windows(items):
@@ -150,9 +171,12 @@ def _stages(args, data):
         out = [ResidualSpec("smooth", wins, width=w) for w in widths]
         return out + [ResidualSpec(args.loss, wins, block, width)]
 
-    if not args.horizons:
+    if args.horizons in ("auto", "none", None):
         return stages_up_to(windows)
-    horizons = _float_list("--horizons", args.horizons, "times in s, e.g. 0.05,0.2")
+    if isinstance(args.horizons, list):
+        horizons = args.horizons
+    else:
+        horizons = _float_list("--horizons", args.horizons, "times in s, e.g. 0.05,0.2")
     increasing = all(b > a for a, b in zip(horizons, horizons[1:], strict=False))
     if not increasing or horizons[0] <= data.t[0]:
         raise ValueError(f"--horizons {args.horizons!r}: times must increase and exceed t[0]")
@@ -183,6 +207,7 @@ def run(args) -> int:
     import time
 
     from ..fit import MeasurementError, fit, load_measurements, make_parameters
+    from ..fit._parameters import check_not_ignored
     from ..fit._plots import plot_fit
     from ..io import (
         atomic_write_bytes,
@@ -212,7 +237,10 @@ def run(args) -> int:
                 else:
                     noise.update({n: float(item) for n in data.names})
             data = data.with_noise(noise)
-        fixed = scene.resolve_params(parse_assignments(args.set))
+        assignments = parse_assignments(args.set)
+        for name in assignments:
+            check_not_ignored(scene, name, "set")
+        fixed = scene.resolve_params(assignments)
         params = make_parameters(scene, args.params, fixed)
         stages = _stages(args, data)
     except (MeasurementError, ValueError) as err:
@@ -239,6 +267,48 @@ def run(args) -> int:
         return _fail(str(err))
 
     names = [p.name for p in params]
+    from ..fit import Comparison
+    from ..fit._fit import tolerance_check
+    from ..fit._schedule import choose_tolerance, impact_horizons, onset_times
+
+    schedule = {}
+    auto_tolerance = args.dt is None and args.rtol is None
+    auto_horizons = args.horizons == "auto" and not args.window
+    if auto_tolerance or auto_horizons:
+        full = Comparison(data, stages[-1])
+        start = {**fixed, **{p.name: p.guess for p in params}}
+        if not args.quiet:
+            print("measuring the model's error at the start point...", file=sys.stderr)
+        try:
+            if auto_tolerance and full.noise_known:
+                control, record = choose_tolerance(scene, start, full, control)
+            else:
+                control, record = control, {}
+                from ..fit._schedule import _run
+
+                record["trajectory"] = _run(
+                    scene, start, full.ts, full.names, {**scene.default_control, **control}
+                )[1]
+        except ValueError as err:
+            return _fail(str(err))
+        except RuntimeError as err:
+            return _fail(str(err), EXIT_FAILED)
+        trajectory = record.pop("trajectory", None)
+        schedule["tolerance"] = record
+        if auto_horizons and trajectory is not None:
+            onsets = onset_times(trajectory)
+            horizons = impact_horizons(onsets, full.t_end)
+            schedule["horizons"] = horizons
+            schedule["onsets_at_start"] = len(onsets)
+            if horizons:
+                args.horizons = horizons
+                stages = _stages(args, data)
+        if not args.quiet:
+            print(
+                f"model tolerance: rtol {control.get('rtol')}, atol {control.get('atol')}; "
+                f"horizons: {schedule.get('horizons') or 'whole record'}",
+                file=sys.stderr,
+            )
     if not args.quiet:
         print(
             f"fitting {', '.join(names)} of {scene.name} to {', '.join(data.names)} "
@@ -246,7 +316,7 @@ def run(args) -> int:
             file=sys.stderr,
             flush=True,
         )
-    start = time.perf_counter()
+    start_time = time.perf_counter()
     try:
         result = fit(
             scene,
@@ -260,9 +330,12 @@ def run(args) -> int:
             seed=args.seed,
             callback=None if args.quiet else _progress(names),
         )
-    except (RuntimeError, ValueError) as err:
+    except ValueError as err:
         return _fail(str(err))
-    wall = time.perf_counter() - start
+    except RuntimeError as err:
+        return _fail(str(err), EXIT_FAILED)
+    tolerance_check(result, scene, fixed, control)
+    wall = time.perf_counter() - start_time
     prepare_output_dir(args.out, args.overwrite)
     # fit.json is written last and marks a complete result: drop an old one first.
     if os.path.exists(os.path.join(args.out, "fit.json")):
@@ -285,6 +358,7 @@ def run(args) -> int:
         ),
         command=sys.argv,
         wall_time_s=wall,
+        schedule=schedule,
         versions=run_metadata(),
     )
     rows = ["stage,evaluation,cost,accepted,damping," + ",".join(names)]
@@ -306,12 +380,15 @@ def run(args) -> int:
     atomic_write_json(f"{args.out}/fit.json", report)
 
     width = max(len(n) for n in names)
-    print(f"{'parameter':<{width}}  {'estimate':>12}  {'std. error':>11}  {'rel.':>7}")
+    print(
+        f"{'parameter':<{width}}  {'estimate':>12}  {'std. error':>11}  {'rel.':>7}"
+        f"  {'x sqrt(chi2/dof)':>16}"
+    )
     for n in names:
         rel = result.relative_errors()[n]
         print(
             f"{n:<{width}}  {result.estimates[n]:12.6g}  {result.standard_errors[n]:11.3g}"
-            f"  {rel:7.2%}"
+            f"  {rel:7.2%}  {result.standard_errors_inflated[n]:16.3g}"
         )
     print(
         f"chi2/dof = {result.reduced_chi2:.3g} ({result.n_residuals} residuals, noise "
@@ -319,5 +396,23 @@ def run(args) -> int:
     )
     for flag in result.flags():
         print(f"warning: {flag}")
+    tol = result.tolerance or {}
+    if "estimate_change_in_standard_errors" in tol:
+        moves = ", ".join(
+            f"{n} {v:+.2g}" for n, v in tol["estimate_change_in_standard_errors"].items()
+        )
+        print(
+            f"tolerance check (rtol {tol['rtol']:g} -> {tol['rtol_check']:g}): model moves "
+            f"{tol['rms_model_change_over_sigma']:.2g} noise levels RMS; a refit would move "
+            f"the estimates by [{moves}] standard errors"
+        )
     print(f"wrote {args.out}/fit.json, history.csv, fit.npz, " + ", ".join(figures))
-    return 0 if result.converged else 1
+    print(f"converged: {'yes' if result.converged else 'NO'} ({result.message})")
+    if result.adequate:
+        print("adequate: yes (chi2/dof consistent with the stated noise, white residuals)")
+        return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
+    print(
+        "adequate: NO -- the model does not explain the data; the estimates may be biased "
+        "far beyond their standard errors (see residuals.png, residual_autocorrelation.png)"
+    )
+    return EXIT_INADEQUATE

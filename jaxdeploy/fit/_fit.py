@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._adequacy import assess
 from ._data import Measurements
 from ._parameters import FitParameter, internal_vector, make_parameters
 from ._residuals import Comparison, ResidualSpec
@@ -82,6 +83,30 @@ class FitResult:
     # curvature does not see at all (singular values at roundoff level).
     at_bound: list[str] = field(default_factory=list)
     unresolved: list[dict[str, float]] = field(default_factory=list)
+    # The verdict of `_adequacy.assess` on the last stage's residuals.
+    adequacy: dict = field(default_factory=dict)
+    # ∂r/∂θ at the optimum (physical units; zero columns for parameters at a bound).
+    jacobian: np.ndarray | None = None
+    # `tolerance_check`'s record (None until it ran).
+    tolerance: dict | None = None
+
+    @property
+    def adequate(self) -> bool:
+        """Whether the model explains the data: χ²/dof consistent with the stated noise and
+        white residuals (`_adequacy`). Independent of `converged`."""
+        return bool(self.adequacy.get("adequate", False))
+
+    @property
+    def inflation(self) -> float:
+        """√(χ²/dof) when the noise level was given and χ²/dof > 1, else 1: the factor that
+        turns the curvature's standard errors into ones consistent with the residuals' actual
+        scatter (Bates & Watts 1988, §2.3, with s² = χ²/dof in place of the stated σ²)."""
+        rc = self.reduced_chi2
+        return math.sqrt(rc) if self.noise_known and math.isfinite(rc) and rc > 1 else 1.0
+
+    @property
+    def standard_errors_inflated(self) -> dict[str, float]:
+        return {n: self.inflation * se for n, se in self.standard_errors.items()}
 
     @property
     def names(self) -> list[str]:
@@ -123,9 +148,13 @@ class FitResult:
         return out
 
     def flags(self) -> list[str]:
-        """One sentence per problem the curvature shows (empty: every parameter is
-        determined and no pair is confounded)."""
-        out = [f"{n} is at its bound (the data push it beyond)" for n in self.at_bound]
+        """One sentence per problem the residuals or the curvature show (empty: the model
+        explains the data, every parameter is determined and no pair is confounded)."""
+        out = [
+            "MODEL DOES NOT EXPLAIN THE DATA: " + reason
+            for reason in self.adequacy.get("reasons", [])
+        ]
+        out += [f"{n} is at its bound (the data push it beyond)" for n in self.at_bound]
         out += [
             f"{n} is not identified (std. error > {NOT_IDENTIFIED:.0%} of the value)"
             for n in self.not_identified()
@@ -146,8 +175,12 @@ class FitResult:
     def report(self) -> dict:
         """A JSON-ready summary."""
         return {
+            "converged": self.converged,
+            "adequate": self.adequate,
             "estimates": self.estimates,
             "standard_errors": self.standard_errors,
+            "standard_errors_inflated": self.standard_errors_inflated,
+            "inflation_factor": self.inflation,
             "relative_standard_errors": self.relative_errors(),
             "correlation": {
                 a: {b: float(self.correlation[i, j]) for j, b in enumerate(self.names)}
@@ -166,9 +199,10 @@ class FitResult:
             "n_residuals": self.n_residuals,
             "reduced_chi2": self.reduced_chi2,
             "noise": "given" if self.noise_known else "estimated from the residuals",
+            "adequacy": self.adequacy,
+            "tolerance": self.tolerance,
             "iterations": self.iterations,
             "evaluations": self.evaluations,
-            "converged": self.converged,
             "message": self.message,
             "wall_time_s": self.wall_time,
             "stages": self.stages,
@@ -410,7 +444,7 @@ def _curvature(parameters, z, r, jac, noise_known, zmax=math.inf):
         {n: float(c) for n, c in zip(names, row, strict=True) if abs(c) > 1e-6} for row in vt[~seen]
     ]
     details = dict(at_bound=[n for n, b in zip(names, at_bound | pinned, strict=True) if b],
-                   unresolved=unresolved)  # fmt: skip
+                   unresolved=unresolved, jacobian=jac_theta)  # fmt: skip
     return theta, se, corr, cov, s, chi2, details
 
 
@@ -536,6 +570,15 @@ def fit(
         params, z, r, jac, comparison.noise_known, zmax=ZMAX
     )
     names = [p.name for p in params]
+    adequacy = assess(r, comparison.labels, len(params), comparison.noise_known)
+    if comparison.spec.kind == "smooth":  # correlated by construction: no verdict
+        adequacy.update(
+            adequate=False,
+            reasons=[
+                "the last stage's residuals are smoothed "
+                "(correlated by construction): end with --loss trajectory or block"
+            ],
+        )
     return FitResult(
         parameters=params,
         estimates=dict(zip(names, map(float, theta), strict=True)),
@@ -557,5 +600,44 @@ def fit(
         comparison_initial=comparisons[0],
         model_final=aux,
         stages=stages,
+        adequacy=adequacy,
         **details,
     )
+
+
+def tolerance_check(result: FitResult, scene, fixed: Mapping, control: Mapping) -> dict:
+    """Rerun the model at the estimate with rtol and atol 10x tighter than the fit's `control`
+    and report (a) the RMS change of the channels in noise levels and (b) the change of the
+    estimates a refit at the tighter tolerance would make, from one Gauss–Newton step with
+    the optimum's Jacobian (Δθ = −J⁺ r_tight: the refit's first iterate, accurate when the
+    change is small), in standard errors. Stored in `result.tolerance` and returned."""
+    from ._schedule import _run, _scaled, model_difference
+
+    cmp_ = result.comparison
+    control = {**scene.default_control, **control}
+    params = {**scene.resolve_params(fixed), **result.estimates}
+    record = {"rtol": control.get("rtol"), "atol": control.get("atol")}
+    if control.get("dt") is not None or control.get("rtol") is None:
+        record["note"] = "fixed step: no tolerance to tighten"
+        result.tolerance = record
+        return record
+    tight = _scaled(control, 0.1)
+    y_tight, _ = _run(scene, params, cmp_.ts, cmp_.names, tight)
+    record.update(rtol_check=tight["rtol"], atol_check=tight.get("atol"))
+    if y_tight is None:
+        record["note"] = "the run at the tighter tolerance failed"
+        result.tolerance = record
+        return record
+    r_tight = cmp_.residuals_np(y_tight)
+    delta = -np.linalg.lstsq(result.jacobian, r_tight, rcond=None)[0]
+    se = np.array([result.standard_errors[n] for n in result.names])
+    record.update(
+        rms_model_change_over_sigma=model_difference(result.model_final, y_tight, cmp_),
+        reduced_chi2_tight=float(r_tight @ r_tight) / max(r_tight.size - len(se), 1),
+        estimate_change={n: float(d) for n, d in zip(result.names, delta, strict=True)},
+        estimate_change_in_standard_errors={
+            n: float(d / e) for n, d, e in zip(result.names, delta, se, strict=True)
+        },
+    )
+    result.tolerance = record
+    return record

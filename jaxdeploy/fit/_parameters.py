@@ -112,6 +112,7 @@ def make_parameters(scene, specs: Sequence, defaults: Mapping | None = None) -> 
             )
         if name in seen:
             raise ValueError(f"parameter {name!r} is given twice")
+        check_not_ignored(scene, name, "fit")
         seen.add(name)
         ps = scene.params[name]
         unit = f" {ps.unit}" if ps.unit else ""
@@ -142,6 +143,18 @@ def make_parameters(scene, specs: Sequence, defaults: Mapping | None = None) -> 
     if not out:
         raise ValueError("no parameter to fit: give at least one with --params NAME[=guess]")
     return out
+
+
+def check_not_ignored(scene, name: str, action: str) -> None:
+    """Refuse to `action` ("fit", "set") a parameter the scene's options make irrelevant
+    (`Scene.ignored_params`), naming the option that makes it count."""
+    ignored = scene.ignored_params()
+    if name in ignored:
+        options = ", ".join(f"{k}={v}" for k, v in scene.options.items())
+        raise ValueError(
+            f"cannot {action} {name!r}: scene {scene.name!r} with {options} does not use it; "
+            f"it counts with --scene-option {ignored[name]}"
+        )
 
 
 def internal_vector(parameters: Sequence[FitParameter], values: Mapping | None = None):

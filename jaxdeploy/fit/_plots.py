@@ -1,5 +1,6 @@
 """Figures of a fit: data against the model at the initial guess and at the estimate, with
-residuals in noise units, and the loss history."""
+residuals in noise units; the residuals against time and their autocorrelation (the whiteness
+test of `_adequacy`); the loss history."""
 
 from __future__ import annotations
 
@@ -51,6 +52,7 @@ def plot_fit(result, out_dir: str) -> list[str]:
         axr.set_xlabel("t [s]")
         fig.tight_layout()
         files.append(save(fig, f"fit_{name}.png"))
+    files += plot_residuals(result, out_dir, plt, save)
     fig, ax = plt.subplots(figsize=(6, 3.5))
     it = np.arange(len(result.history))
     cost = np.array([h["cost"] for h in result.history])
@@ -69,4 +71,48 @@ def plot_fit(result, out_dir: str) -> list[str]:
     ax.legend(fontsize=8)
     fig.tight_layout()
     files.append(save(fig, "loss_history.png"))
+    return files
+
+
+def plot_residuals(result, out_dir, plt, save) -> list[str]:
+    """`residuals.png` (residual/σ against time per channel, with the ±2 band of the stated
+    noise) and `residual_autocorrelation.png` (sample autocorrelation per channel with the
+    ±2/√n band of white noise, and the Ljung–Box verdict in the title)."""
+    cmp_ = result.comparison
+    r = cmp_.residuals_np(result.model_final)
+    labels = np.asarray(cmp_.labels)
+    verdict = "adequate" if result.adequate else "NOT ADEQUATE"
+    n_ch = len(cmp_.names)
+    fig, axes = plt.subplots(n_ch, 1, figsize=(8, 2.4 * n_ch + 0.6), sharex=True, squeeze=False)
+    for ax, name in zip(axes[:, 0], cmp_.names, strict=True):
+        ax.plot(cmp_.times, r[labels == name], ".", ms=2.5, color="tab:blue")
+        ax.axhline(0.0, color="k", lw=0.6)
+        for y in (-2.0, 2.0):
+            ax.axhline(y, color="tab:red", lw=0.6, ls="--")
+        ax.set_ylabel(f"{name}: residual / σ")
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.suptitle(
+        f"χ²/dof = {result.reduced_chi2:.3g} ({verdict}); dashed: ±2 stated noise", fontsize=9
+    )
+    fig.tight_layout()
+    files = [save(fig, "residuals.png")]
+    fig, axes = plt.subplots(n_ch, 1, figsize=(7, 2.4 * n_ch + 0.6), squeeze=False)
+    for ax, name in zip(axes[:, 0], cmp_.names, strict=True):
+        w = result.adequacy["whiteness"][name]
+        rho = np.asarray(w["autocorrelation"])
+        lags = np.arange(rho.size)
+        ax.vlines(lags[1:], 0.0, rho[1:], color="tab:blue")
+        ax.plot(lags[1:], rho[1:], "o", ms=3, color="tab:blue")
+        band = 2.0 / np.sqrt(w["n"])
+        ax.axhspan(-band, band, color="0.85")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_ylabel(f"{name}: ρ̂(lag)")
+        ax.set_title(
+            f"Ljung–Box Q = {w['Q']:.3g} over {w['lags']} lags, p = {w['p_value_corrected']:.2g}"
+            + (" (white)" if w["white"] else " (NOT white)"),
+            fontsize=9,
+        )
+    axes[-1, 0].set_xlabel("lag [residuals]  (grey: ±2/√n, white noise)")
+    fig.tight_layout()
+    files.append(save(fig, "residual_autocorrelation.png"))
     return files

@@ -33,6 +33,77 @@ SLIP_VELOCITY_SPEC = ParamSpec(
 )
 
 
+# Contact-law parameters of a clearance joint (irrelevant when the joint is made ideal).
+CONTACT_PARAMS = (
+    "youngs_modulus",
+    "poisson_ratio",
+    "sigma",
+    "restitution",
+    "friction_coefficient",
+    "impact_velocity_floor",
+    "friction_slip_velocity",
+)
+
+# A journal of radius R_j in a bore of radius R_b = R_j + c: two of the three sizes are
+# parameters, the third follows. What users measure decides which two: a clearance is usually
+# specified with the journal (or the bore) given, and a measured joint gives two diameters.
+# `geometry` option value -> the two parameters.
+JOINT_SIZE_NAMES = ("journal_radius", "clearance", "bore_radius")
+JOINT_GEOMETRIES = {
+    "journal_clearance": ("journal_radius", "clearance"),
+    "bore_clearance": ("bore_radius", "clearance"),
+    "bore_journal": ("bore_radius", "journal_radius"),
+}
+
+
+def joint_geometry_params(params: dict, geometry: str) -> dict:
+    """The scene's parameter specs with the joint sizes of `geometry` (`JOINT_GEOMETRIES`):
+    `params` must hold `journal_radius` and `clearance`; the bore's spec is the journal's
+    default plus the clearance's, positive."""
+    kept = JOINT_GEOMETRIES[geometry]
+    j, c = params["journal_radius"], params["clearance"]
+    bore = ParamSpec(j.default + c.default, 0, j.high, "m", "bore radius R_b = R_j + c", False)
+    out = {}
+    for name, spec in params.items():
+        if name in JOINT_SIZE_NAMES:
+            for size in JOINT_SIZE_NAMES:  # keep the scene's order, at the first size's place
+                if name == "journal_radius" and size in kept:
+                    out[size] = bore if size == "bore_radius" else params[size]
+            continue
+        out[name] = spec
+    return out
+
+
+def complete_joint_geometry(params, geometry: str) -> dict:
+    """`params` with all three joint sizes, the missing one from R_b = R_j + c (traceable)."""
+    p = dict(params)
+    if geometry == "bore_clearance":
+        p["journal_radius"] = p["bore_radius"] - p["clearance"]
+    elif geometry == "bore_journal":
+        p["clearance"] = p["bore_radius"] - p["journal_radius"]
+    else:
+        p["bore_radius"] = p["journal_radius"] + p["clearance"]
+    return p
+
+
+def check_joint_geometry(params, geometry: str) -> None:
+    """Refuse (concrete values) a bore not larger than the journal, naming both."""
+    from .._validation import is_concrete
+
+    if geometry == "journal_clearance":
+        return  # both positive by their ranges
+    p = complete_joint_geometry(params, geometry)
+    b, j, c = p["bore_radius"], p["journal_radius"], p["clearance"]
+    if is_concrete((b, j, c)) and not (float(j) > 0 and float(c) > 0):
+        raise ValueError(
+            f"bore_radius = {float(b)!r} m is invalid with "
+            + (f"clearance = {float(c)!r} m" if geometry == "bore_clearance"
+               else f"journal_radius = {float(j)!r} m")
+            + f" (geometry={geometry}): the bore must be larger than the journal "
+            f"(journal_radius = bore_radius − clearance > 0 and clearance > 0)"
+        )  # fmt: skip
+
+
 def check_choice(name: str, value: str, valid) -> str:
     """`value` if it is one of `valid`; else a ValueError naming the option and the choices."""
     if value not in valid:

@@ -53,6 +53,13 @@ class Scene(abc.ABC):
     def default_params(self) -> dict[str, float]:
         return {k: spec.default for k, spec in self.params.items()}
 
+    def ignored_params(self) -> dict[str, str]:
+        """Parameters the scene's options make irrelevant (the run does not depend on them),
+        each with the option setting that would make it count, e.g. `{"restitution":
+        "damping=lankarani_nikravesh"}`. A fit refuses to fit or set these (its derivative is
+        exactly zero, so it would be reported "not identified" or silently unused)."""
+        return {}
+
     def resolve_params(self, overrides: Mapping[str, float] | None = None) -> dict:
         """Defaults updated with `overrides`; unknown names and out-of-range values raise
         `ValueError` naming the parameter, the value and the valid range."""

@@ -53,6 +53,15 @@ class Impact(Scene):
     def options(self) -> dict:
         return {"damping": self.damping, "impact_velocity_rule": self.impact_velocity_rule}
 
+    def ignored_params(self) -> dict[str, str]:
+        damped = f"damping=<one of {', '.join(sorted(NORMAL_LAWS))}>"
+        out = {}
+        if self.damping in ("none", "hunt_crossley_material"):
+            out.update(restitution=damped, impact_velocity_floor=damped)
+        if self.damping != "hunt_crossley_material":
+            out["material_damping"] = "damping=hunt_crossley_material"
+        return out
+
     def normal_law(self, params):
         if is_exactly_zero(params["sigma"]):
             elastic = contact.HertzElastic(params["stiffness"])

@@ -33,10 +33,17 @@ from ..mechanism import (
     consistent_state,
 )
 from ._contact import (
+    CONTACT_PARAMS,
     IMPACT_VELOCITY_FLOOR_SPEC,
+    JOINT_GEOMETRIES,
+    JOINT_SIZE_NAMES,
     SLIP_VELOCITY_SPEC,
+    check_choice,
     check_contact_options,
+    check_joint_geometry,
     clearance_contact_laws,
+    complete_joint_geometry,
+    joint_geometry_params,
 )
 from .base import ParamSpec, Scene, is_exactly_zero
 
@@ -78,12 +85,28 @@ class SliderCrank(Scene):
         normal_law: str = "lankarani_nikravesh",
         impact_velocity_rule: str = "onset",
         friction_shape: str = "algebraic",
+        geometry: str = "journal_clearance",
     ):
         check_contact_options(normal_law, impact_velocity_rule, friction_shape)
+        check_choice("geometry", geometry, tuple(JOINT_GEOMETRIES))
         self.ideal = ideal
         self.normal_law = normal_law
         self.impact_velocity_rule = impact_velocity_rule
         self.friction_shape = friction_shape
+        self.geometry = geometry
+        # The joint's two independent sizes (JOINT_GEOMETRIES); the third follows from them.
+        self.params = joint_geometry_params(type(self).params, geometry)
+
+    def ignored_params(self) -> dict[str, str]:
+        if not self.ideal:
+            return {}
+        contact = [n for n in self.params if n in CONTACT_PARAMS or n in JOINT_SIZE_NAMES]
+        return dict.fromkeys(contact, "ideal=false")
+
+    def complete(self, params) -> dict:
+        """`params` with the joint's three sizes (journal_radius, clearance, bore_radius [m]),
+        whichever two the geometry option made parameters."""
+        return complete_joint_geometry(params, self.geometry)
 
     @property
     def options(self) -> dict:
@@ -92,10 +115,13 @@ class SliderCrank(Scene):
             "normal_law": self.normal_law,
             "impact_velocity_rule": self.impact_velocity_rule,
             "friction_shape": self.friction_shape,
+            "geometry": self.geometry,
         }
 
     def check_params(self, params):
-        """The crank must be shorter than the rod, or the mechanism locks before a revolution."""
+        """The crank must be shorter than the rod, or the mechanism locks before a revolution;
+        the bore must be larger than the journal."""
+        check_joint_geometry(params, self.geometry)
         r, ell = params["crank_length"], params["rod_length"]
         if is_concrete((r, ell)) and not float(r) < float(ell):
             raise ValueError(
@@ -105,7 +131,7 @@ class SliderCrank(Scene):
             )
 
     def build(self, params):
-        p = params
+        p = self.complete(params)
         r, ell = p["crank_length"], p["rod_length"]
         zero = 0.0 * r
         crank = Body(
@@ -177,12 +203,12 @@ class SliderCrank(Scene):
     def summary(self, params, mechanism, trajectory):
         from ..analysis.slider_crank import slider_crank_summary
 
-        return slider_crank_summary(self, params, mechanism, trajectory)
+        return slider_crank_summary(self, self.complete(params), mechanism, trajectory)
 
     def plot(self, params, mechanism, trajectory, out_dir):
         from ..analysis.slider_crank import plot_slider_crank
 
-        return plot_slider_crank(self, params, mechanism, trajectory, out_dir)
+        return plot_slider_crank(self, self.complete(params), mechanism, trajectory, out_dir)
 
 
 def ideal_slider_kinematics(crank_length, rod_length, crank_speed, t):

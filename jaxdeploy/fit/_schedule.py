@@ -1,0 +1,135 @@
+"""Defaults a fit takes from the data: the model's step tolerance (from the noise level) and the
+horizons of the continuation (from the spacing of the impacts).
+
+**Tolerance.** The model's integration error must sit well below the measurement noise, or the
+fit absorbs it into the parameters and the residuals stop being white. A local error tolerance
+does not bound the global error of a run with impacts (each impact amplifies earlier errors),
+so the tolerance is chosen by measurement, at the fit's start point: run the model at
+rtol_k = rtol_0·10^(−k) (atol scaled alike) and take the loosest rtol_k whose channels differ
+from those at rtol_(k+1) by at most `MODEL_ERROR` noise levels RMS over the fitted samples
+(the tighter run is ~10x more accurate, so the difference estimates the looser run's error;
+Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.4). A model error of 0.2 σ RMS adds 0.04 to
+χ²/dof. rtol_0 is the smaller of the scene's default and 1e-2 σ/RMS(y), never below
+`RTOL_FLOOR`: below it the error estimate of a float64 run is round-off (slider_crank at
+rtol 1e-11 stalls at 6 ms with 2e6 steps). After the fit `tolerance_check` repeats the
+comparison at the estimate and computes the Gauss–Newton step a refit at the tighter
+tolerance would take, in standard errors.
+
+**Horizons.** Each impact multiplies the sensitivity of the later motion to the parameters, so
+the loss over many impacts is rugged (local minima a few per cent apart) while over a few it is
+a smooth bowl tens of per cent wide (docs/identification.md). With the run at the start point
+showing onsets at t_1 < t_2 < …, the fit grows its horizon through the onsets
+`FIRST_IMPACTS`, 2·`FIRST_IMPACTS`, 4·`FIRST_IMPACTS`, … and ends on the whole record, each
+stage starting from the previous estimate: the windows come from the impact spacing of this
+record, not from constants. A record without impacts gets one stage.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+MODEL_ERROR = 0.2  # largest model error accepted, RMS, in noise levels
+RTOL_FLOOR = 1e-10
+FIRST_IMPACTS = 4
+MAX_DECADES = 6
+
+
+def _run(scene, params, ts, names, control):
+    from ..batch import run_scene
+
+    traj = run_scene(scene, params, float(ts[-1]), ts=np.asarray(ts), control=control)
+    if not traj.ok:
+        return None, None
+    channels = scene.select_channels(scene.build(params), traj, names)
+    return {n: np.asarray(v) for n, v in channels.items()}, traj
+
+
+def _scaled(control: Mapping, factor: float) -> dict:
+    out = dict(control)
+    out["rtol"] = control["rtol"] * factor
+    if control.get("atol") is not None:
+        out["atol"] = control["atol"] * factor
+    return out
+
+
+def model_difference(a: Mapping, b: Mapping, comparison) -> float:
+    """Largest over channels of the RMS of (a − b)/σ over the fitted samples."""
+    used = comparison.used
+    return max(
+        float(np.sqrt(np.mean(((a[n] - b[n])[used] / comparison.sigma[n]) ** 2)))
+        for n in comparison.names
+    )
+
+
+def choose_tolerance(scene, params: Mapping, comparison, control: Mapping | None = None):
+    """`(control, record)`: the step control whose model error at `params` is at most
+    `MODEL_ERROR` noise levels RMS (module docstring), and what was measured. `record` also
+    holds the start run's trajectory (`"trajectory"`, not JSON) for `impact_horizons`."""
+    base = {**scene.default_control, **(control or {})}
+    ts, names = comparison.ts, comparison.names
+    if base.get("rtol") is None or base.get("dt") is not None:  # fixed steps: nothing to choose
+        y, traj = _run(scene, params, ts, names, base)
+        return dict(control or {}), {"chosen_rtol": None, "met": None, "steps": [],
+                                     "note": "fixed step", "trajectory": traj}  # fmt: skip
+    scale = max(float(np.sqrt(np.mean(comparison.data_features[n] ** 2))) for n in comparison.names)
+    noise = min(comparison.sigma.values())
+    rtol0 = min(base["rtol"], 1e-2 * noise / scale) if scale > 0 else base["rtol"]
+    rtol0 = max(10.0 ** math.floor(math.log10(rtol0)), RTOL_FLOOR)
+    current = _scaled(base, rtol0 / base["rtol"])
+    y, traj = _run(scene, params, ts, names, current)
+    if y is None:
+        raise RuntimeError(
+            f"the model cannot be simulated at the start point with rtol {rtol0:g}; change the "
+            "guess, the bounds or give --rtol"
+        )
+    steps = []
+    for _ in range(MAX_DECADES):
+        if current["rtol"] / 10.0 < RTOL_FLOOR * (1 - 1e-9):
+            break
+        tighter = _scaled(current, 0.1)
+        y_tight, traj_tight = _run(scene, params, ts, names, tighter)
+        if y_tight is None:
+            break
+        diff = model_difference(y, y_tight, comparison)
+        steps.append({"rtol": current["rtol"], "rtol_check": tighter["rtol"],
+                      "rms_difference_over_sigma": diff})  # fmt: skip
+        if diff <= MODEL_ERROR:
+            return current, {"chosen_rtol": current["rtol"], "met": True, "steps": steps,
+                             "trajectory": traj}  # fmt: skip
+        current, y, traj = tighter, y_tight, traj_tight
+    return current, {"chosen_rtol": current["rtol"], "met": False, "steps": steps,
+                     "trajectory": traj}  # fmt: skip
+
+
+def onset_times(trajectory) -> np.ndarray:
+    """Contact onsets seen at the saved times (a clearance joint's `in_contact` going 0 → 1),
+    all joints together, sorted [s]. Contacts shorter than the save spacing may be missed,
+    which only coarsens the schedule."""
+    ts = np.asarray(trajectory.ts)
+    out = []
+    for memory in trajectory.memory or ():
+        if not isinstance(memory, Mapping) or "in_contact" not in memory:
+            continue
+        flag = np.asarray(memory["in_contact"]) > 0.5
+        if flag.ndim != 1:
+            continue
+        out.extend(ts[1:][flag[1:] & ~flag[:-1]])
+    return np.sort(np.asarray(out, dtype=float))
+
+
+def impact_horizons(onsets, t_end: float) -> list[float]:
+    """Horizons through the onsets number FIRST_IMPACTS, 2·FIRST_IMPACTS, … (the midpoint to
+    the next onset, so a stage ends in flight), then `t_end`; [] for fewer impacts."""
+    onsets = np.asarray(onsets, dtype=float)
+    onsets = onsets[onsets < t_end]
+    out = []
+    n = FIRST_IMPACTS
+    while n < onsets.size:
+        horizon = 0.5 * (onsets[n - 1] + onsets[n])
+        if not out or horizon > out[-1]:
+            out.append(float(horizon))
+        n *= 2
+    return [*out, float(t_end)] if out else []

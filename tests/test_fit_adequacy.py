@@ -1,0 +1,116 @@
+"""Model mismatch is reported: χ²/dof against the stated noise and the whiteness of the residuals
+decide `adequate`, separately from `converged`; the command's exit status says which."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from jaxdeploy.cli import main
+from jaxdeploy.fit import Measurements, synthesize
+from jaxdeploy.fit._adequacy import assess, autocorrelation, chi2_upper_tail, ljung_box
+from jaxdeploy.scenes import Pendulum
+
+
+@pytest.mark.parametrize("k", [10, 30, 200, 1200])
+@pytest.mark.parametrize("p", [0.5, 1e-2, 1e-3, 1e-5])
+def test_chi2_tail_matches_scipy_where_decisions_are_made(k, p):
+    """Wilson–Hilferty: the approximate tail probability at scipy's exact quantile is within
+    a factor 1.5 of p down to 1e-5 (the decision level is 1e-3)."""
+    x = stats.chi2.isf(p, k)
+    assert chi2_upper_tail(x, k) == pytest.approx(p, rel=0.5)
+
+
+def test_white_noise_is_white_and_a_correlated_sequence_is_not():
+    rng = np.random.default_rng(1)
+    white = rng.standard_normal(1200)
+    lb = ljung_box(white)
+    assert lb["lags"] == 20 and lb["p_value"] > 1e-3
+    assert lb["fraction_outside_2_over_sqrt_n"] <= 0.15
+    # AR(1) with coefficient 0.3: the lag-1 autocorrelation is 0.3 ± 0.03
+    ar = np.empty(1200)
+    ar[0] = white[0]
+    for i in range(1, ar.size):
+        ar[i] = 0.3 * ar[i - 1] + white[i]
+    assert autocorrelation(ar, 1)[1] == pytest.approx(0.3, abs=0.1)
+    assert ljung_box(ar)["p_value"] < 1e-6
+
+
+def test_verdict_needs_a_large_chi2_and_is_per_channel():
+    rng = np.random.default_rng(2)
+    r = rng.standard_normal(2000)
+    labels = np.repeat(["a", "b"], 1000)
+    ok = assess(r, labels, 2, noise_known=True)
+    assert ok["adequate"] and ok["reasons"] == []
+    assert ok["reduced_chi2"] == pytest.approx(1.0, abs=0.1)
+    # noise understated by 30 %: χ²/dof ≈ 1.7, statistically significant but below the limit
+    assert assess(1.3 * r, labels, 2, noise_known=True)["adequate"]
+    # understated 2x: χ²/dof ≈ 4
+    bad = assess(2.0 * r, labels, 2, noise_known=True)
+    assert not bad["adequate"] and "chi2/dof" in bad["reasons"][0]
+    # noise not given: χ² says nothing, whiteness still does
+    assert assess(2.0 * r, labels, 2, noise_known=False)["adequate"]
+    drift = r + np.concatenate([np.zeros(1000), np.sin(np.linspace(0, 6, 1000))])
+    verdict = assess(drift, labels, 2, noise_known=True)
+    assert not verdict["adequate"]
+    assert verdict["whiteness"]["a"]["white"] and not verdict["whiteness"]["b"]["white"]
+    assert verdict["reasons"][0].startswith("b: residuals are not white")
+
+
+def _pendulum_data(tmp_path, extra):
+    """Pendulum angle (1 % noise, stated) plus `extra(t)`, an effect the model lacks."""
+    scene = Pendulum()
+    t = np.linspace(0.0, 1.0, 201)
+    data = synthesize(scene, {"length": 0.8, "initial_angle": -0.6}, t, ["rod_theta"], seed=4)
+    y = data.channels["rod_theta"] + extra(t)
+    path = tmp_path / "pendulum.csv"
+    Measurements(t, {"rod_theta": y}, data.noise).save(str(path))
+    return path, data.noise["rod_theta"]
+
+
+def _fit(tmp_path, path, name):
+    out = tmp_path / name
+    argv = ["fit", str(path), "--scene", "pendulum", "--params", "length=1.0:0.1:5",
+            "--set", "initial_angle=-0.6", "--out", str(out)]  # fmt: skip
+    return main(argv), json.loads((out / "fit.json").read_text()), out
+
+
+def test_a_good_fit_exits_0_and_an_unmodelled_effect_exits_3(tmp_path, capsys):
+    """Same pendulum, same noise: without the extra effect the fit is adequate (exit 0); with a
+    slow oscillation of 3 noise levels that the model cannot produce, the fit still converges
+    but is reported inadequate (exit 3), in fit.json and on the console, with standard errors
+    inflated by √(χ²/dof)."""
+    path, sigma = _pendulum_data(tmp_path, lambda t: 0.0 * t)
+    code, good, out = _fit(tmp_path, path, "good")
+    assert code == 0
+    assert good["converged"] and good["adequate"]
+    assert good["adequacy"]["whiteness"]["rod_theta"]["white"]
+    assert good["inflation_factor"] == pytest.approx(max(1.0, math.sqrt(good["reduced_chi2"])))
+    assert (out / "residuals.png").exists() and (out / "residual_autocorrelation.png").exists()
+    assert "adequate: yes" in capsys.readouterr().out
+
+    path, _ = _pendulum_data(tmp_path, lambda t: 3 * sigma * np.sin(2 * np.pi * 2.5 * t))
+    code, bad, _ = _fit(tmp_path, path, "bad")
+    assert code == 3
+    assert bad["converged"] and not bad["adequate"]
+    assert not bad["adequacy"]["whiteness"]["rod_theta"]["white"]
+    assert bad["reduced_chi2"] > 2
+    assert any(f.startswith("MODEL DOES NOT EXPLAIN THE DATA") for f in bad["flags"])
+    se, inflated = bad["standard_errors"]["length"], bad["standard_errors_inflated"]["length"]
+    assert inflated == pytest.approx(se * math.sqrt(bad["reduced_chi2"]))
+    printed = capsys.readouterr().out
+    assert "adequate: NO" in printed and "warning: MODEL DOES NOT EXPLAIN" in printed
+
+
+def test_a_fit_stopped_early_exits_4(tmp_path):
+    """Started 0.1 % off (many standard errors) and allowed one trial step: the step lands on
+    the optimum's neighbourhood (adequate) but the optimiser's criterion was not met."""
+    path, _ = _pendulum_data(tmp_path, lambda t: 0.0 * t)
+    out = tmp_path / "early"
+    argv = ["fit", str(path), "--scene", "pendulum", "--params", "length=0.8008:0.1:5",
+            "--set", "initial_angle=-0.6", "--max-iterations", "1", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 4
+    report = json.loads((out / "fit.json").read_text())
+    assert not report["converged"] and report["adequate"]
