@@ -206,8 +206,7 @@ def run(args) -> int:
     import os
     import time
 
-    from ..fit import MeasurementError, fit, load_measurements, make_parameters
-    from ..fit._parameters import check_not_ignored
+    from ..fit import MeasurementError, check_not_ignored, fit, load_measurements, make_parameters
     from ..fit._plots import plot_fit
     from ..io import (
         atomic_write_bytes,
@@ -267,9 +266,14 @@ def run(args) -> int:
         return _fail(str(err))
 
     names = [p.name for p in params]
-    from ..fit import Comparison
-    from ..fit._fit import tolerance_check
-    from ..fit._schedule import choose_tolerance, impact_horizons, onset_times
+    from ..fit import (
+        Comparison,
+        choose_tolerance,
+        impact_horizons,
+        onset_times,
+        run_channels,
+        tolerance_check,
+    )
 
     schedule = {}
     auto_tolerance = args.dt is None and args.rtol is None
@@ -284,9 +288,7 @@ def run(args) -> int:
                 control, record = choose_tolerance(scene, start, full, control)
             else:
                 control, record = control, {}
-                from ..fit._schedule import _run
-
-                record["trajectory"] = _run(
+                record["trajectory"] = run_channels(
                     scene, start, full.ts, full.names, {**scene.default_control, **control}
                 )[1]
         except ValueError as err:

@@ -10,13 +10,20 @@ docs/identification.md.
 
 from ._data import MeasurementError, Measurements, load_measurements
 from ._derivatives import central_differences, output_function, parameter_jacobian
-from ._fit import FitResult, fit, levenberg_marquardt
-from ._parameters import FitParameter, make_parameters, parse_param_spec
+from ._fit import FitResult, fit, levenberg_marquardt, tolerance_check
+from ._parameters import FitParameter, check_not_ignored, make_parameters, parse_param_spec
 from ._residuals import Comparison, ResidualSpec
+from ._schedule import choose_tolerance, impact_horizons, onset_times, run_channels
 from ._synthetic import model_channels, synthesize
 
 __all__ = [
     "Comparison",
+    "check_not_ignored",
+    "choose_tolerance",
+    "impact_horizons",
+    "onset_times",
+    "run_channels",
+    "tolerance_check",
     "central_differences",
     "FitParameter",
     "FitResult",

@@ -611,7 +611,7 @@ def tolerance_check(result: FitResult, scene, fixed: Mapping, control: Mapping) 
     estimates a refit at the tighter tolerance would make, from one Gauss–Newton step with
     the optimum's Jacobian (Δθ = −J⁺ r_tight: the refit's first iterate, accurate when the
     change is small), in standard errors. Stored in `result.tolerance` and returned."""
-    from ._schedule import _run, _scaled, model_difference
+    from ._schedule import _scaled, model_difference, run_channels
 
     cmp_ = result.comparison
     control = {**scene.default_control, **control}
@@ -622,7 +622,7 @@ def tolerance_check(result: FitResult, scene, fixed: Mapping, control: Mapping) 
         result.tolerance = record
         return record
     tight = _scaled(control, 0.1)
-    y_tight, _ = _run(scene, params, cmp_.ts, cmp_.names, tight)
+    y_tight, _ = run_channels(scene, params, cmp_.ts, cmp_.names, tight)
     record.update(rtol_check=tight["rtol"], atol_check=tight.get("atol"))
     if y_tight is None:
         record["note"] = "the run at the tighter tolerance failed"

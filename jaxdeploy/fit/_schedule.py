@@ -37,7 +37,7 @@ FIRST_IMPACTS = 4
 MAX_DECADES = 6
 
 
-def _run(scene, params, ts, names, control):
+def run_channels(scene, params, ts, names, control):
     from ..batch import run_scene
 
     traj = run_scene(scene, params, float(ts[-1]), ts=np.asarray(ts), control=control)
@@ -71,7 +71,7 @@ def choose_tolerance(scene, params: Mapping, comparison, control: Mapping | None
     base = {**scene.default_control, **(control or {})}
     ts, names = comparison.ts, comparison.names
     if base.get("rtol") is None or base.get("dt") is not None:  # fixed steps: nothing to choose
-        y, traj = _run(scene, params, ts, names, base)
+        y, traj = run_channels(scene, params, ts, names, base)
         return dict(control or {}), {"chosen_rtol": None, "met": None, "steps": [],
                                      "note": "fixed step", "trajectory": traj}  # fmt: skip
     scale = max(float(np.sqrt(np.mean(comparison.data_features[n] ** 2))) for n in comparison.names)
@@ -79,7 +79,7 @@ def choose_tolerance(scene, params: Mapping, comparison, control: Mapping | None
     rtol0 = min(base["rtol"], 1e-2 * noise / scale) if scale > 0 else base["rtol"]
     rtol0 = max(10.0 ** math.floor(math.log10(rtol0)), RTOL_FLOOR)
     current = _scaled(base, rtol0 / base["rtol"])
-    y, traj = _run(scene, params, ts, names, current)
+    y, traj = run_channels(scene, params, ts, names, current)
     if y is None:
         raise RuntimeError(
             f"the model cannot be simulated at the start point with rtol {rtol0:g}; change the "
@@ -90,7 +90,7 @@ def choose_tolerance(scene, params: Mapping, comparison, control: Mapping | None
         if current["rtol"] / 10.0 < RTOL_FLOOR * (1 - 1e-9):
             break
         tighter = _scaled(current, 0.1)
-        y_tight, traj_tight = _run(scene, params, ts, names, tighter)
+        y_tight, traj_tight = run_channels(scene, params, ts, names, tighter)
         if y_tight is None:
             break
         diff = model_difference(y, y_tight, comparison)
