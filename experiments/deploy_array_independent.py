@@ -179,6 +179,10 @@ def main():
         results[label] = compare(
             ts, alpha, alpha_ref, t_lock, ref.lock_time, rate_lock, ref.lock_rate, lock_angle
         )
+        results[label]["agrees"] = bool(
+            results[label]["max_rel_alpha_difference"] < AGREEMENT
+            and results[label]["lock_time_rel_difference"] < AGREEMENT
+        )
         results[label]["control"] = control
         results[label]["accepted_steps"] = int(tr.stats["num_accepted_steps"])
         histories[label] = alpha
@@ -280,8 +284,9 @@ def page_block(n, revision):
         f"{n['agreement_required_rel']:.0e}):",
         "",
         "| jaxdeploy run | steps | max rel Δα | max abs Δα before / after lock [rad] | "
-        "after lock / latch swing | lock time [s] | rel Δ lock time | rel Δ α̇ at lock |",
-        "|---|---|---|---|---|---|---|---|",
+        "after lock / latch swing | lock time [s] | rel Δ lock time | rel Δ α̇ at lock | "
+        "within 1e-6 |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for label, r in n["jaxdeploy"].items():
         lines.append(
@@ -290,7 +295,7 @@ def page_block(n, revision):
             f"{r['max_abs_alpha_difference_after_lock_rad']:.1e} | "
             f"{r['max_alpha_difference_after_lock_over_latch_swing']:.1e} | "
             f"{r['lock_time_s']:.12f} | {r['lock_time_rel_difference']:.1e} | "
-            f"{r['lock_rate_rel_difference']:.1e} |"
+            f"{r['lock_rate_rel_difference']:.1e} | {'yes' if r['agrees'] else '**no**'} |"
         )
     lines += [
         "",
