@@ -8,37 +8,20 @@ angle history and the lock time within 1e-6 relative; the package is run at the 
 default step control, the one every user gets.
 """
 
-import importlib.util
-import pathlib
-import sys
-
 import numpy as np
 import pytest
+from independent.deploy_array_minimal import DeployArrayMinimal
 
 from jaxdeploy.scenes import DeployArray
 from jaxdeploy.scenes.deploy_array import deployment_angle
 from jaxdeploy.simulation import simulate
 
-REFERENCE = pathlib.Path(__file__).resolve().parent / "independent" / "deploy_array_minimal.py"
 AGREEMENT = 1e-6  # relative, issue 24 item 5
-
-
-def _reference_module():
-    # Loaded by path: tests/ is not a package, and tests/independent/ may or may not be one.
-    # Registered before it runs: its dataclasses look their module up in sys.modules.
-    name = "_independent_deploy_array_minimal"
-    if name in sys.modules:
-        return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, REFERENCE)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture(scope="module")
 def reference():
-    return _reference_module().DeployArrayMinimal()
+    return DeployArrayMinimal()
 
 
 def test_reference_conserves_energy_until_the_lock(reference):
