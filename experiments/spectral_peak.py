@@ -1,0 +1,407 @@
+"""deploy_array's post-lock spectral peak: which solver is right, and is the estimate well posed?
+Writes docs/spectral_peak.md and docs/figures/spectral_peak.png.
+
+    PYTHONPATH=. python experiments/spectral_peak.py [--doc-only]
+
+The default run (2 s, the scene's parameters) with Tsit5 and generalized-α at their defaults
+and at tighter settings — Tsit5 at rtol 1e-7 and 1e-8, Dopri8 at rtol 1e-9 and 1e-10,
+generalized-α with ρ∞ = 1 (no numerical damping), at rtol 1e-7, and with fixed 2 µs steps and
+ρ∞ = 1 — each saved at 20 kHz (40001 states; saving does not change the steps), and the
+ideal-joint mechanism. From the saved states, per run and panel, the post-lock peak frequency
+of the centre's Y acceleration by
+
+* the estimate `jaxdeploy simulate` reported before (point samples of the saved acceleration,
+  one Hann window over the whole post-lock record, largest bin), at the save rates 1 kHz (the
+  CLI's default 2001 states over 2 s) and 20 kHz;
+* the estimate it reports now (`analysis.spectra.peak_frequency`: Welch spectrum of the
+  interval-mean acceleration from the saved velocities, 0.2 s segments), at 0.5, 1 and 20 kHz
+  and with segments of 0.1–1.46 s;
+
+how long the runs stay together (first time panel 1's Y velocity leaves the tightest run by
+1 % of its range), and the ideal mechanism's peak against its latch mode. Runs are cached in
+results/spectral_peak/ (`--doc-only` rewrites the page from them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+
+import numpy as np
+
+from jaxdeploy.analysis.deploy_array import SPECTRUM_SEGMENT, lock_time
+from jaxdeploy.analysis.spectra import (
+    amplitude_spectrum,
+    interval_mean_rate,
+    peak_frequency,
+    welch_psd,
+)
+from jaxdeploy.benchmarks.report import machine_description
+from jaxdeploy.io import atomic_write_bytes, atomic_write_json, atomic_write_npz, run_metadata
+from jaxdeploy.scenes import DeployArray
+from jaxdeploy.scenes.deploy_array import GEOMETRY, deployment_angle
+from jaxdeploy.simulation import simulate
+from jaxdeploy.solvers import GeneralizedAlpha
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DOC = os.path.join(ROOT, "docs", "spectral_peak.md")
+FIGURE = os.path.join(ROOT, "docs", "figures", "spectral_peak.png")
+CACHE = os.path.join(ROOT, "results", "spectral_peak")
+N_SAVE = 40001  # 20 kHz over 2 s; every 20th state is the CLI's default 2001-state grid
+STRIDES = {"0.5 kHz": 40, "1 kHz": 20, "20 kHz": 1}
+SEGMENTS = (0.1, 0.2, 0.4, None)  # None: the whole post-lock record (one segment)
+PANELS = ("panel1", "panel2")
+DEFAULT = {"rtol": 1e-6, "atol": 1e-9, "dt_max": 5e-4}
+# (key, label, control). The first two are the scene's defaults with each solver; "dopri8_10"
+# is the tightest run, the one the others' divergence is measured against.
+RUNS = (
+    ("tsit5", "Tsit5, rtol 1e-6 (default)", {**DEFAULT, "solver": "tsit5"}),
+    ("ga", "generalized-α ρ∞ 0.8, rtol 1e-6 (default)", {**DEFAULT, "solver": GeneralizedAlpha()}),
+    ("tsit5_7", "Tsit5, rtol 1e-7", {**DEFAULT, "rtol": 1e-7, "atol": 1e-10, "solver": "tsit5"}),
+    ("tsit5_8", "Tsit5, rtol 1e-8", {**DEFAULT, "rtol": 1e-8, "atol": 1e-11, "solver": "tsit5"}),
+    ("dopri8_9", "Dopri8, rtol 1e-9", {**DEFAULT, "rtol": 1e-9, "atol": 1e-12, "solver": "dopri8"}),
+    (
+        "dopri8_10",
+        "Dopri8, rtol 1e-10",
+        {**DEFAULT, "rtol": 1e-10, "atol": 1e-13, "solver": "dopri8"},
+    ),
+    (
+        "ga_rho1",
+        "generalized-α ρ∞ 1, rtol 1e-6",
+        {**DEFAULT, "solver": GeneralizedAlpha(rho_inf=1.0)},
+    ),
+    (
+        "ga_7",
+        "generalized-α ρ∞ 0.8, rtol 1e-7",
+        {**DEFAULT, "rtol": 1e-7, "atol": 1e-10, "solver": GeneralizedAlpha()},
+    ),
+    (
+        "ga_fixed",
+        "generalized-α ρ∞ 1, fixed 2 µs steps",
+        {"dt": 2e-6, "solver": GeneralizedAlpha(rho_inf=1.0)},
+    ),
+)
+REFERENCE = "dopri8_10"
+
+
+def run_all(scene_params=None):
+    """Every run of RUNS and the ideal mechanism, cached as npz (panel columns only)."""
+    os.makedirs(CACHE, exist_ok=True)
+    for key, label, control in (*RUNS, ("ideal", "ideal joints, Tsit5", None)):
+        path = os.path.join(CACHE, f"{key}.npz")
+        if os.path.exists(path):
+            continue
+        scene = DeployArray(ideal=key == "ideal")
+        params = scene.resolve_params()
+        mech = scene.build(params)
+        init = scene.initial_state(params, mech)
+        control = control or {**scene.default_control}
+        start = time.perf_counter()
+        tr = simulate(mech, init, scene.default_t_end, n_save=N_SAVE, **control)
+        tr.q.block_until_ready()
+        wall = time.perf_counter() - start
+        columns = [3 * mech.body_index(p) + 1 for p in PANELS]  # centre Y of each panel
+        atomic_write_npz(
+            path,
+            t=np.asarray(tr.ts),
+            alpha=np.asarray(deployment_angle(tr.q)),
+            v=np.asarray(tr.v)[:, columns],
+            qdd=np.asarray(tr.qdd)[:, columns],
+            steps=int(tr.stats["num_accepted_steps"]),
+            wall=wall,
+            status=tr.status(),
+        )
+        print(f"{label}: {tr.status()}, {int(tr.stats['num_accepted_steps'])} steps", flush=True)
+
+
+def load(key):
+    with np.load(os.path.join(CACHE, f"{key}.npz")) as d:
+        return {k: d[k] for k in d.files}
+
+
+def before_estimate(t, acc, t_lock):
+    """What `jaxdeploy simulate` reported before: point samples after the lock, mean
+    removed, one Hann window over the whole record, the largest bin ≥ 1 Hz."""
+    after = t > t_lock
+    f, amp = amplitude_spectrum(t[after], acc[after])
+    keep = f >= 1.0
+    return float(f[keep][np.argmax(amp[keep])])
+
+
+def after_estimate(t, vel, t_lock, segment=SPECTRUM_SEGMENT):
+    """What it reports now (analysis/deploy_array.py): Welch peak of the interval-mean
+    acceleration over the intervals that begin at or after the lock."""
+    starts, acc = interval_mean_rate(t, vel)
+    after = starts >= t_lock
+    seg = segment if segment is not None else starts[after][-1] - starts[after][0] + 1.0
+    return peak_frequency(starts[after], acc[after], segment=seg)
+
+
+def measure():
+    out = {"runs": {}, "machine": machine_description(), "versions": run_metadata()}
+    ref = load(REFERENCE)
+    for key, label, _ in (*RUNS, ("ideal", "ideal joints, Tsit5 (default control)", None)):
+        d = load(key)
+        t = d["t"]
+        # the summary's lock time: from the run's own saved α at the CLI's default grid
+        t_lock = lock_time(t[::20], d["alpha"][::20], GEOMETRY["latch"]["engage_alpha"])
+        rec = {
+            "label": label,
+            "steps": int(d["steps"]),
+            "wall_s": float(d["wall"]),
+            "status": str(d["status"]),
+            "lock_time": t_lock,
+        }
+        for i, panel in enumerate(PANELS):
+            vel, acc = d["v"][:, i], d["qdd"][:, i]
+            rec[panel] = {
+                "before": {
+                    r: before_estimate(t[::s], acc[::s], t_lock) for r, s in STRIDES.items()
+                },
+                "after": {r: after_estimate(t[::s], vel[::s], t_lock) for r, s in STRIDES.items()},
+                "segments": {
+                    str(seg): after_estimate(t[::20], vel[::20], t_lock, seg) for seg in SEGMENTS
+                },
+            }
+        if key != "ideal":
+            dv = np.abs(d["v"][:, 0] - ref["v"][:, 0])
+            scale = np.ptp(ref["v"][:, 0])
+            apart = np.flatnonzero(dv > 0.01 * scale)
+            rec["apart_from_reference_s"] = float(t[apart[0]]) if len(apart) else None
+        out["runs"][key] = rec
+    sweep = GEOMETRY["reference_sweep"]
+    inertia = float(np.interp(np.pi / 2, sweep["alpha"], sweep["generalized_inertia"]))
+    stiffness = GEOMETRY["latch"]["k_latch"] + GEOMETRY["coil_spring"]["k"]
+    zeta = GEOMETRY["latch"]["c_latch"] / (2 * np.sqrt(stiffness * inertia))
+    out["latch_mode"] = {
+        "inertia_kg_m2": inertia,
+        "zeta": zeta,
+        "f_damped_hz": float(np.sqrt(stiffness / inertia) * np.sqrt(1 - zeta**2) / (2 * np.pi)),
+        "half_power_bandwidth_hz": float(2 * zeta * np.sqrt(stiffness / inertia) / (2 * np.pi)),
+    }
+    return out
+
+
+def figure(result):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from jaxdeploy.io import atomic_savefig
+
+    fig, axes = plt.subplots(3, 1, figsize=(8, 9))
+    for key, _, _ in RUNS:
+        d = load(key)
+        t, t_lock = d["t"][::20], result["runs"][key]["lock_time"]
+        for i, ax in enumerate(axes[:2]):
+            starts, acc = interval_mean_rate(t, d["v"][::20, i])
+            after = starts >= t_lock
+            f, psd = welch_psd(starts[after], acc[after], SPECTRUM_SEGMENT)
+            ax.semilogy(f, psd, lw=0.7, label=result["runs"][key]["label"])
+        if key in ("tsit5", "ga"):
+            after = t > t_lock
+            f, amp = amplitude_spectrum(t[after], d["qdd"][::20, 0][after])
+            axes[2].semilogy(f, amp, lw=0.6, label=result["runs"][key]["label"])
+    for i, ax in enumerate(axes[:2]):
+        ax.set_title(
+            f"panel {i + 1}: Welch spectrum ({SPECTRUM_SEGMENT:g} s segments) of the "
+            "interval-mean Y acceleration, 1 kHz saves (now)",
+            fontsize=9,
+        )
+        ax.set_ylabel("(m/s²)²/Hz")
+    axes[0].legend(fontsize=6)
+    axes[2].set_title(
+        "panel 1: before — Hann amplitude spectrum of the point-sampled acceleration, 1 kHz",
+        fontsize=9,
+    )
+    axes[2].set_ylabel("m/s²")
+    axes[2].legend(fontsize=7)
+    for ax in axes:
+        ax.set_xlim(0, 500)
+        ax.grid(alpha=0.3)
+    axes[2].set_xlabel("frequency [Hz]")
+    fig.tight_layout()
+    atomic_savefig(fig, FIGURE, dpi=110)
+    plt.close(fig)
+
+
+def _spread(values):
+    return max(values) - min(values)
+
+
+def write_doc(result):
+    runs = result["runs"]
+    keys = [k for k, _, _ in RUNS]
+    machine = result["machine"]
+    where = f"{machine.get('Model name', machine['platform'])}, {machine.get('CPU(s)', '?')} CPUs"
+    git = result["versions"].get("git") or {}
+    commit = git.get("commit", "?")[:10] + (" (uncommitted changes)" if git.get("dirty") else "")
+    res_hz = 1.0 / SPECTRUM_SEGMENT
+
+    def table(panel):
+        head = (
+            "| run | steps | before, 1 kHz | before, 20 kHz | now, 0.5 kHz | now, 1 kHz "
+            "| now, 20 kHz |\n|---|---|---|---|---|---|---|"
+        )
+        lines = []
+        for k in keys:
+            r, p = runs[k], runs[k][panel]
+            lines.append(
+                f"| {r['label']} | {r['steps']} | {p['before']['1 kHz']:.1f} "
+                f"| {p['before']['20 kHz']:.1f} | {p['after']['0.5 kHz']:.1f} "
+                f"| {p['after']['1 kHz']:.1f} | {p['after']['20 kHz']:.1f} |"
+            )
+        spreads = [
+            _spread([runs[k][panel][kind][rate] for k in keys])
+            for kind, rate in (
+                ("before", "1 kHz"),
+                ("before", "20 kHz"),
+                ("after", "0.5 kHz"),
+                ("after", "1 kHz"),
+                ("after", "20 kHz"),
+            )
+        ]
+        lines.append("| **spread (max − min)** | | " + " | ".join(f"**{s:.1f}**" for s in spreads))
+        return head + "\n" + "\n".join(lines), spreads
+
+    t1, s1 = table("panel1")
+    t2, s2 = table("panel2")
+    seg_head = (
+        "| segment [s] | resolution [Hz] | panel 1: range over the runs [Hz] "
+        "| panel 2: range [Hz] |\n|---|---|---|---|"
+    )
+    seg_lines = []
+    for seg in SEGMENTS:
+        cells = []
+        for panel in PANELS:
+            vals = [runs[k][panel]["segments"][str(seg)] for k in keys]
+            cells.append(f"{min(vals):.1f}–{max(vals):.1f} (spread {_spread(vals):.1f})")
+        post = runs["tsit5"]["lock_time"]
+        length = seg if seg is not None else 2.0 - post
+        name = f"{seg:g}" if seg is not None else f"whole record ({length:.2f})"
+        seg_lines.append(f"| {name} | {1 / length:.1f} | " + " | ".join(cells) + " |")
+    apart = [
+        f"{runs[k]['label']} {runs[k]['apart_from_reference_s']:.3f} s"
+        for k in keys
+        if k != REFERENCE and runs[k]["apart_from_reference_s"] is not None
+    ]
+    lm = result["latch_mode"]
+    ideal = runs["ideal"]
+    gen, ts5 = runs["ga"]["panel1"], runs["tsit5"]["panel1"]
+    now = {p: [runs[k][p]["after"]["1 kHz"] for k in keys] for p in PANELS}
+    rate_spread = max(
+        _spread([runs[k][p]["after"][r] for r in STRIDES]) for k in keys for p in PANELS
+    )
+    text = f"""# deploy_array: one scene, two solvers, one spectral peak (generated)
+
+*Written by `PYTHONPATH=. python experiments/spectral_peak.py` at commit {commit}; rerun it to
+regenerate (runs cached in results/spectral_peak/). {where}. Issue 19 item 7.*
+
+`jaxdeploy simulate deploy_array` reports `panel{{1,2}}_peak_freq_hz`, the post-lock spectral
+peak of each panel centre's Y acceleration. With the scene's default step control it read
+**{ts5["before"]["1 kHz"]:.1f} Hz with Tsit5 and {gen["before"]["1 kHz"]:.1f} Hz with
+generalized-α** for panel 1. Neither solver was wrong: the estimate was not well posed.
+
+## Which is right
+
+Every run below is the default scene over 2 s, saved at 20 kHz (saving does not change the
+steps; every 20th state is the CLI's default grid of 2001). "Before" is the estimate reported
+until now (point samples of the saved acceleration, one Hann window over the whole post-lock
+record, largest bin); "now" is the one reported from this commit on (below). Peaks in Hz.
+
+**Panel 1**
+
+{t1}
+
+**Panel 2**
+
+{t2}
+
+* **The old estimate scatters over the reference runs themselves**: Tsit5 at rtol 1e-7 and
+  1e-8 give ≈ 200 Hz just like generalized-α at its default, the two Dopri8 references
+  disagree with each other, and its spread over these runs is {s1[0]:.0f} Hz (panel 1) and
+  {s2[0]:.0f} Hz (panel 2). No tolerance and no solver setting makes it converge.
+* **Not generalized-α's numerical damping**: ρ∞ = 1 (none), a tighter tolerance and fixed
+  2 µs steps land in the same scatter as ρ∞ = 0.8. The steps after the lock are tens of µs,
+  where ωh at 200 Hz is ~0.03 and the algorithmic damping of ρ∞ = 0.8 is negligible.
+* **Not the interpolated saved accelerations**: at 20 kHz the saved accelerations are point
+  values much closer to the steps' own, and the old estimate still scatters by
+  {s1[1]:.0f} Hz.
+* **The causes** are the estimate's: (1) **aliasing** — after the lock the panel acceleration
+  is a train of impacts lasting microseconds, flat in frequency far above 10 kHz; point
+  samples at 1 kHz fold all of it onto 0–500 Hz (the third plot below is flat to the Nyquist
+  frequency), and whether a sample falls inside an impact decides the spectrum; (2) **a
+  resolution finer than the signal supports** — one window over the 1.46 s record resolves
+  ~1 Hz, but the ringing lasts ~0.1 s and its resonance is {lm["half_power_bandwidth_hz"]:.1f}
+  Hz wide (latch damping ratio ζ = {lm["zeta"]:.3f}), so the largest bin is one of many ripples
+  made by the interference of individual rattle impacts; (3) those impacts are **chaotic**:
+  the runs leave the tightest one (by 1 % of panel 1's velocity range) at
+  {", ".join(apart)}. Any quantity that depends on the individual impacts after ~0.6 s has no
+  converged reference at any tolerance.
+* **The right answer** is the resonance every run shows once the estimate is well posed:
+  panel 1 **{min(now["panel1"]):.1f}–{max(now["panel1"]):.1f} Hz**
+  over all nine runs, the latch mode (ideal joints: {lm["f_damped_hz"]:.1f} Hz from
+  f_d = √((k_L + k)/I(90°)) √(1 − ζ²)/2π with I(90°) = {lm["inertia_kg_m2"]:.3f} kg m² from
+  the design study; the ideal run's estimate {ideal["panel1"]["after"]["1 kHz"]:.1f} Hz)
+  lowered a little by the hinges' clearance; panel 2
+  **{min(now["panel2"]):.1f}–{max(now["panel2"]):.1f} Hz**.
+  Both solvers at their defaults were equally right about the physics; the 200 Hz was the
+  estimate's.
+
+## The estimate now (`jaxdeploy/analysis/spectra.py`)
+
+1. **The interval-mean acceleration** (v(t_(k+1)) − v(t_k))/Δt from the saved velocities
+   instead of point samples of the acceleration: the mean over each save interval, what an
+   integrating sensor reports. Every impulse between samples is counted once, exactly, and the
+   averaging is a low-pass filter (gain |sinc(f/f_s)|) applied before sampling. Its spread over
+   the save rates 0.5, 1 and 20 kHz is at most
+   {rate_spread:.1f} Hz per run.
+2. **Welch's averaged periodogram** (Welch 1967) with {SPECTRUM_SEGMENT:g} s Hann segments, half
+   overlapping, mean removed per segment: resolution {res_hz:g} Hz — finer than the latch
+   mode's {lm["half_power_bandwidth_hz"]:.1f} Hz bandwidth, coarser than the chaotic ripple.
+   The segment's effect (1 kHz saves, all nine runs):
+
+{seg_head}
+{chr(10).join(seg_lines)}
+
+   With 0.4 s or more panel 2's spectrum has two peaks of similar height (near 80 and
+   160 Hz, the figure's middle plot) and the largest switches between runs; {SPECTRUM_SEGMENT:g}
+   s keeps both panels within one resolution cell. The first segment's taper de-weights the
+   first tens of ms after the lock, where the panel's arrest (from ~1 m/s to rest) dominates
+   the acceleration rather than the ringing.
+3. The maximum bin refined by a parabola through the log power at it and its neighbours.
+
+Over the nine runs the spread is now {s1[3]:.1f} Hz (panel 1) and {s2[3]:.1f} Hz (panel 2) at
+the default save rate, within the {res_hz:g} Hz resolution, where it was {s1[0]:.0f} and
+{s2[0]:.0f} Hz. Tests: `tests/test_spectra.py` (a tone between bins, Parseval, and a
+resonance under impacts that point samples alias), `tests/test_deploy_array.py`
+(the ideal mechanism's peak is its latch mode; slow: Tsit5 and generalized-α at the defaults
+agree within the resolution).
+
+![spectra](figures/spectral_peak.png)
+"""
+    atomic_write_bytes(DOC, text.encode())
+    print(f"wrote {DOC}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--doc-only", action="store_true", help="rewrite the page from the cache")
+    args = ap.parse_args(argv)
+    result_path = os.path.join(CACHE, "result.json")
+    if args.doc_only:
+        with open(result_path) as fh:
+            result = json.load(fh)
+    else:
+        run_all()
+        result = measure()
+        atomic_write_json(result_path, result)
+    figure(result)
+    write_doc(result)
+
+
+if __name__ == "__main__":
+    main()
