@@ -89,7 +89,7 @@ def test_ideal_post_lock_spectral_peak_is_the_latch_mode(ideal_run):
     generalized inertia I(90°) tabulated by the design study (not by the simulation), damped
     by c_L, so f_d = √((k_L + k)/I) √(1 − ζ²) / 2π with ζ = c_L / (2 √((k_L + k) I)). The
     summary's estimate (Welch peak of the interval-mean panel acceleration) must find it
-    within half its 5 Hz resolution."""
+    within half its resolution 1/SPECTRUM_SEGMENT."""
     mech, tr = ideal_run
     sweep = GEOMETRY["reference_sweep"]
     inertia = float(np.interp(np.pi / 2, sweep["alpha"], sweep["generalized_inertia"]))
@@ -139,9 +139,10 @@ def test_small_clearance_and_roughness_approach_the_ideal_mechanism(ideal_run):
 def test_both_solvers_report_the_same_post_lock_spectral_peaks():
     """`jaxdeploy simulate` (2 s, 2001 saved states, the scene's step control) with Tsit5 and
     with generalized-α: the post-lock rattle is chaotic, so the trajectories part after
-    ~0.6 s, but the spectral peaks of both panels must agree within the estimate's
-    resolution (1/SPECTRUM_SEGMENT = 5 Hz). Before the estimate was made robust
-    (docs/spectral_peak.md) panel 1 read 85 Hz with one solver and 201 Hz with the other."""
+    ~0.56 s, but the spectral peaks of both panels must agree within half the estimate's
+    resolution 1/SPECTRUM_SEGMENT (measured spread over solvers and tolerances: < 1 Hz, docs/
+    spectral_peak.md). Before the estimate was made robust panel 1 read 85 Hz with one solver
+    and 201 Hz with the other (running-max impact rule), 96 and 31 Hz (onset rule)."""
     scene = DeployArray()
     params = scene.resolve_params()
     mech = scene.build(params)
@@ -154,5 +155,5 @@ def test_both_solvers_report_the_same_post_lock_spectral_peaks():
         summary = deploy_array_summary(scene, params, mech, tr)
         peaks[solver] = [summary[f"{p}_peak_freq_hz"] for p in ("panel1", "panel2")]
     np.testing.assert_allclose(
-        peaks["tsit5"], peaks["generalized_alpha"], atol=1.0 / SPECTRUM_SEGMENT
+        peaks["tsit5"], peaks["generalized_alpha"], atol=0.5 / SPECTRUM_SEGMENT
     )

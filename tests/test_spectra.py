@@ -58,9 +58,9 @@ def test_resonance_under_impacts_from_the_saved_velocities():
     for seed in range(8):
         t, a, v = _ringing_with_impacts(seed)
         starts, mean_acc = interval_mean_rate(t[::step], v[::step])
-        from_velocities.append(peak_frequency(starts, mean_acc, segment=0.2))
-        point_sampled.append(peak_frequency(t[::step], a[::step], segment=0.2))
-    np.testing.assert_allclose(from_velocities, 90.0, atol=2.5)  # half a 5 Hz bin
+        from_velocities.append(peak_frequency(starts, mean_acc, segment=0.1))
+        point_sampled.append(peak_frequency(t[::step], a[::step], segment=0.1))
+    np.testing.assert_allclose(from_velocities, 90.0, atol=2.5)  # a quarter of a 10 Hz bin
     # The records are hard: point samples of the same signals miss the resonance in some.
     assert sum(abs(f - 90.0) > 5.0 for f in point_sampled) >= 2, point_sampled
 

@@ -15,12 +15,12 @@ from ..io import atomic_savefig
 from .contact_forces import clearance_joint_history
 from .spectra import interval_mean_rate, peak_frequency, welch_psd
 
-# Welch segment [s] of the panel acceleration spectra (resolution 1/0.2 s = 5 Hz): about the
-# duration of the post-lock ringing and finer than the latch mode's half-power bandwidth
-# (2ζf ≈ 9.5 Hz, docs/deploy_array_geometry.md), so the resonance is one peak; a longer
-# segment resolves the interference between single rattle impacts, which is chaotic
-# (docs/spectral_peak.md measures 0.1–0.4 s).
-SPECTRUM_SEGMENT = 0.2
+# Welch segment [s] of the panel acceleration spectra: 0.1 s, resolution 10 Hz, about the
+# latch mode's half-power bandwidth (2ζf ≈ 9.5 Hz, docs/deploy_array_geometry.md), so the
+# resonance is one peak whose location the parabola refines, and 28 segments averaged over the
+# post-lock record. Longer segments resolve the interference between single rattle impacts,
+# which is chaotic: docs/spectral_peak.md measures 0.1–1.46 s over solvers and tolerances.
+SPECTRUM_SEGMENT = 0.1
 
 PANELS = ("panel1", "panel2")
 
