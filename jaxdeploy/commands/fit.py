@@ -92,7 +92,7 @@ def add_arguments(parser) -> None:
         metavar="T1,T2,...|auto|none",
         help="continuation: fit up to T1, then T2, ... (each from the last); auto (default): "
         "through the 4th, 8th, 16th, ... impact of the model at the start, then the whole "
-        "record (none without impacts or with --window)",
+        "record (none without impacts, or with --window or --widths)",
     )
     parser.add_argument("--max-iterations", type=int, default=30)
     parser.add_argument(
@@ -277,7 +277,8 @@ def run(args) -> int:
 
     schedule = {}
     auto_tolerance = args.dt is None and args.rtol is None
-    auto_horizons = args.horizons == "auto" and not args.window
+    # The default continuation applies where the user chose none (no windows, no widths).
+    auto_horizons = args.horizons == "auto" and not args.window and not args.widths
     if auto_tolerance or auto_horizons:
         full = Comparison(data, stages[-1])
         start = {**fixed, **{p.name: p.guess for p in params}}
