@@ -22,7 +22,7 @@ from jaxdeploy.fit import (
     make_parameters,
     synthesize,
 )
-from jaxdeploy.fit._fit import _curvature, latin_hypercube_starts
+from jaxdeploy.fit._fit import AT_BOUND, ZMAX, _curvature, latin_hypercube_starts
 from jaxdeploy.fit._residuals import Comparison
 from jaxdeploy.scenes import Impact, Pendulum
 
@@ -247,13 +247,13 @@ def test_a_parameter_driven_onto_its_bound_gets_an_infinite_error_not_a_crash():
     assert result.at_bound == ["a"] and result.confounded_pairs() == []
     assert result.unresolved_combinations() == []
     assert result.flags() == ["a is at its bound (the data push it beyond)"]
-    # With LM's limit on the internal coordinate (as in `fit`) a stops at the limit, is
+    # With LM's limit on the internal coordinate (as in `fit`) a stops near the limit, is
     # reported at its bound, and keeps its (finite) column: b is then fitted given a = 1.5.
-    z, r, jac, _, _ = levenberg_marquardt(model, z0, max_iterations=200, zmax=20.0)
-    assert z[0] == 20.0
-    theta, se, _, _, _, _, details = _curvature(params, z, r, jac, noise_known=True, zmax=20.0)
+    z, r, jac, _, _ = levenberg_marquardt(model, z0, max_iterations=200, zmax=ZMAX)
+    assert AT_BOUND <= z[0] <= ZMAX
+    theta, se, _, _, _, _, details = _curvature(params, z, r, jac, noise_known=True)
     assert details["at_bound"] == ["a"] and np.all(np.isfinite(se))
-    assert theta[0] == pytest.approx(1.5, rel=1e-8)
+    assert theta[0] == pytest.approx(1.5, rel=1e-6)
 
 
 def _result_from_curvature(params, z, r, jac):

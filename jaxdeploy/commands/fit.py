@@ -300,7 +300,7 @@ def run(args) -> int:
         schedule["tolerance"] = record
         if auto_horizons and trajectory is not None:
             onsets = onset_times(trajectory)
-            horizons = impact_horizons(onsets, full.t_end)
+            horizons = impact_horizons(onsets, full.t_end, float(data.t[0]))
             schedule["horizons"] = horizons
             schedule["onsets_at_start"] = len(onsets)
             if horizons:
@@ -364,10 +364,10 @@ def run(args) -> int:
         schedule=schedule,
         versions=run_metadata(),
     )
-    rows = ["stage,evaluation,cost,accepted,damping," + ",".join(names)]
+    rows = ["stage,evaluation,cost,accepted,step," + ",".join(names)]
     for h in result.history:
         rows.append(
-            f"{h['stage']},{h['iteration']},{h['cost']!r},{int(h['accepted'])},{h['damping']!r},"
+            f"{h['stage']},{h['iteration']},{h['cost']!r},{int(h['accepted'])},{h['step']!r},"
             + ",".join(repr(h["params"][n]) for n in names)
         )
     atomic_write_bytes(f"{args.out}/history.csv", ("\n".join(rows) + "\n").encode())

@@ -7,11 +7,10 @@ comes from forward-mode AD through the solver (`jax.jacfwd` with `diffrax.Forwar
 tangent per fitted parameter, so the cost grows with the number of parameters, which is small
 here). Residuals and Jacobian are one compiled function, evaluated once per LM trial step.
 
-Levenberg–Marquardt with Marquardt's diagonal scaling and Nielsen's damping update
-(K. Madsen, H. B. Nielsen, O. Tingleff, *Methods for non-linear least squares problems*,
-2nd ed., DTU 2004, Algorithm 3.16 and eq. 3.14). The loop runs in Python around the compiled
-evaluation so that every iteration is reported (progress, loss history) and a failed
-simulation is a rejected step, not a NaN in the optimiser.
+The optimiser is optimistix's Levenberg–Marquardt (lineax QR for the damped Gauss–Newton
+step, a classical trust-region update of the damping), stepped one trial point at a time by
+`levenberg_marquardt` so that every trial is reported (progress, loss history) and a failed
+simulation is a rejected step (infinite loss), not a NaN inside the optimiser.
 
 Rugged losses (impacts make the loss jump between basins: a guess 50 % off in restitution
 can sit in another basin) get a global first stage, `starts=N`: N points of a Latin hypercube
@@ -31,6 +30,7 @@ parameter space is seen.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -47,10 +47,12 @@ from ._residuals import Comparison, ResidualSpec
 # identified; a pair with |correlation| above CORRELATED as confounded.
 NOT_IDENTIFIED = 0.5
 CORRELATED = 0.95
-# LM keeps the internal coordinates in [−ZMAX, ZMAX]: within ~e^(−20) ≈ 2e-9 of a bound in
-# the logistic variable, a parameter is reported "at its bound" (further, its dθ/dz
-# underflows and its column of the Jacobian is lost to roundoff).
+# LM keeps the internal coordinates in [−ZMAX, ZMAX] (further, dθ/dz underflows and the
+# parameter's column of the Jacobian is lost to roundoff). A parameter with |z| ≥ AT_BOUND,
+# within e^(−15) ≈ 3e-7 of a bound in the logistic variable, is reported "at its bound": an
+# optimiser crawling towards a bound it cannot cross slows down long before ZMAX.
 ZMAX = 20.0
+AT_BOUND = 15.0
 
 
 @dataclass
@@ -312,6 +314,24 @@ def latin_hypercube_starts(parameters, n: int, seed: int) -> np.ndarray:
     return np.log(s / (1.0 - s))
 
 
+def _linearisation(z, args):
+    """The model as optimistix sees it: its linearisation `r₀ + J₀ (z − z₀)` at the point z₀
+    where the solver evaluates next (`levenberg_marquardt`)."""
+    r0, jac0, z0 = args
+    return r0 + jac0 @ (z - z0), None
+
+
+@functools.cache
+def _stepper():
+    import equinox as eqx
+
+    @eqx.filter_jit
+    def step(solver, y, args, state):
+        return solver.step(_linearisation, y, args, {}, state, frozenset())
+
+    return step
+
+
 def levenberg_marquardt(
     model: Callable,
     z0: np.ndarray,
@@ -320,79 +340,99 @@ def levenberg_marquardt(
     ftol: float = 1e-8,
     ctol: float = 0.0,
     xtol: float = 1e-8,
-    gtol: float = 1e-10,
-    tau: float = 1e-3,
     zmax: float = math.inf,
     callback: Callable | None = None,
 ):
-    """Minimise ½|r(z)|² with `model(z) -> (r, J, aux, ok)` (Madsen et al. 2004, Alg. 3.16,
-    Marquardt scaling `D = diag(JᵀJ)`).
+    """Minimise ½|r(z)|² with `model(z) -> (r, J, aux, ok)`: optimistix's Levenberg–Marquardt
+    (`optx.LevenbergMarquardt` with lineax's QR solve of the damped least-squares problem
+    [J; √λ I] h = −[r; 0], and the classical trust-region update of λ = 1/step size: a trial
+    is accepted when its actual decrease of ½|r|² is at least 0.01 of the Gauss–Newton model's
+    prediction, the step size grows ×3.5 when it exceeds 0.99 of it and shrinks ×¼ on a
+    rejection; Conn, Gould & Toint, *Trust-Region Methods*, SIAM 2000, Alg. 6.1.1).
 
-    Stops when an accepted step lowers the cost by less than `ftol` relative or by less than
-    `ctol` absolute (residuals in noise units: a change of ½ in the cost is one standard
-    error, so a decrease far below that is statistically irrelevant), when the step
-    is below `xtol (|z| + xtol)`, when `|Jᵀr|_∞ ≤ gtol`, or after `max_iterations` trial
-    steps. **Returns:** `(z, r, J, aux, info)`.
+    The solver is stepped here, one `step` per trial point, rather than run by
+    `optx.least_squares`, so that (a) every trial is reported (`callback`, history) and
+    (b) the model is our compiled residual-and-Jacobian function, evaluated once per trial.
+    A Gauss–Newton-type `step` evaluates its function once, linearised, at its next trial
+    point (`state.y_eval`); it is handed the model's linearisation there (`_linearisation`:
+    value r, Jacobian J), which is all it uses. A failed simulation (`ok` false) enters as
+    r = +inf: its loss is infinite, the trust region rejects it and shrinks the step.
+    Internal coordinates beyond ±`zmax` are evaluated at ±`zmax` with a zero Jacobian column
+    (the derivative of the clip), so a parameter driven there stays at its bound.
+
+    Stops when optimistix's Cauchy criterion holds (accepted step and change of every residual
+    below `xtol` relative/absolute), when an accepted step lowers the cost by less than `ftol`
+    relative or by less than `ctol` absolute (residuals in noise units: a change of ½ in the
+    cost is one standard error, so a decrease far below that is statistically irrelevant), or
+    after `max_iterations` trials. **Returns:** `(z, r, J, aux, info)` at the best accepted
+    point, with the model's Jacobian there.
     """
-    r, jac, aux, ok = model(z0)
+    import jax
+    import jax.numpy as jnp
+    import lineax as lx
+    import optimistix as optx
+
+    z = np.clip(np.asarray(z0, dtype=float), -zmax, zmax)
+    r, jac, aux, ok = model(z)
     if not ok:
         raise RuntimeError(
             "the model cannot be evaluated at the initial guess (the simulation failed or "
             "gave non-finite outputs); change the guess, the bounds or the step control"
         )
     aux0 = aux
-    z = np.asarray(z0, dtype=float)
+    solver = optx.LevenbergMarquardt(rtol=xtol, atol=xtol, linear_solver=lx.QR())
+    step = _stepper()
+    args = (jnp.asarray(r), jnp.asarray(jac), jnp.asarray(z))
+    f_struct = jax.ShapeDtypeStruct(r.shape, r.dtype)
+    y = jnp.asarray(z)
+    state = solver.init(_linearisation, y, args, {}, f_struct, None, frozenset())
+    y, state, _ = step(solver, y, args, state)  # optimistix's first step accepts the start
     cost = 0.5 * float(r @ r)
-    history = [dict(iteration=0, cost=cost, accepted=True, damping=math.nan, z=z.tolist())]
+    history = [dict(iteration=0, cost=cost, accepted=True, step=0.0, z=z.tolist())]
     if callback:
         callback(history[-1])
-    mu, nu = None, 2.0
     evaluations, converged, message = 1, False, "maximum number of iterations reached"
     iteration = 0
     for iteration in range(1, max_iterations + 1):
-        a = jac.T @ jac
-        g = jac.T @ r
-        if np.max(np.abs(g)) <= gtol:
-            converged, message = True, "gradient below tolerance"
-            break
-        d = np.maximum(np.diag(a), 1e-12 * max(np.max(np.diag(a)), 1e-300))
-        mu = tau if mu is None else mu
-        h = np.linalg.solve(a + mu * np.diag(d), -g)
-        h = np.clip(z + h, -zmax, zmax) - z  # internal coordinates kept in [−zmax, zmax]
-        if np.linalg.norm(h) <= xtol * (np.linalg.norm(z) + xtol):
-            converged, message = True, "step below tolerance"
-            break
-        r_new, jac_new, aux_new, ok = model(z + h)
+        trial = np.asarray(state.y_eval)
+        clipped = np.abs(trial) > zmax
+        z_trial = np.clip(trial, -zmax, zmax)
+        r_new, jac_new, aux_new, ok = model(z_trial)
         evaluations += 1
-        cost_new = 0.5 * float(r_new @ r_new) if ok else math.inf
-        predicted = -float(g @ h + 0.5 * h @ (a @ h))  # the Gauss–Newton model's decrease
-        rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
-        accepted = ok and rho > 0
-        if accepted:
-            absolute_decrease = cost - cost_new
-            decrease = absolute_decrease / cost
-            z, r, jac, aux, cost = z + h, r_new, jac_new, aux_new, cost_new
-            mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-            nu = 2.0
+        if ok:
+            args = (jnp.asarray(r_new), jnp.asarray(np.where(clipped, 0.0, jac_new)), trial)
         else:
-            mu *= nu
-            nu *= 2.0
+            args = (jnp.full_like(r, jnp.inf), jnp.zeros_like(jac), trial)
+        y_before = np.asarray(y)
+        y, state, _ = step(solver, y, args, state)
+        accepted = ok and bool(np.array_equal(np.asarray(y), trial))
+        cost_new = 0.5 * float(r_new @ r_new) if ok else math.inf
         history.append(
             dict(
                 iteration=iteration,
-                cost=cost if accepted else cost_new,
+                cost=cost_new,
                 accepted=accepted,
-                damping=mu,
-                z=(z if accepted else z + h).tolist(),
+                step=float(np.linalg.norm(trial - y_before)),
+                z=z_trial.tolist(),
                 simulation_ok=ok,
             )
         )
         if callback:
             callback(history[-1])
-        if accepted and decrease < ftol:
+        if accepted:
+            decrease = cost - cost_new
+            z, r, jac, aux, cost = z_trial, r_new, jac_new, aux_new, cost_new
+        done, result = solver.terminate(_linearisation, y, args, {}, state, frozenset())
+        if result != optx.RESULTS.successful:
+            message = f"optimistix: {optx.RESULTS[result]}"
+            break
+        if bool(done):
+            converged, message = True, "step and residual change below tolerance"
+            break
+        if accepted and decrease < ftol * (cost + decrease):
             converged, message = True, "relative cost decrease below tolerance"
             break
-        if accepted and absolute_decrease < ctol:
+        if accepted and decrease < ctol:
             converged, message = True, "cost decrease below ctol (statistically negligible)"
             break
     info = dict(
@@ -406,7 +446,7 @@ def levenberg_marquardt(
     return z, r, jac, aux, info
 
 
-def _curvature(parameters, z, r, jac, noise_known, zmax=math.inf):
+def _curvature(parameters, z, r, jac, noise_known):
     """Covariance, standard errors, correlations and singular values at the optimum."""
     theta = np.array([float(p.to_physical(zk)) for p, zk in zip(parameters, z, strict=True)])
     dtheta = np.array([p.dphysical_dz(zk) for p, zk in zip(parameters, z, strict=True)])
@@ -414,9 +454,9 @@ def _curvature(parameters, z, r, jac, noise_known, zmax=math.inf):
     # say nothing about it there beyond "at the bound", so its column is left out (zero),
     # which gives it an infinite standard error below.
     at_bound = ~(np.abs(dtheta) > 0) | ~np.isfinite(dtheta)
-    # Pinned by LM's limit on z: within e^(−zmax) of the bound in the logistic variable, so
-    # "at the bound" for the report; its column (still finite) is kept.
-    pinned = np.abs(np.asarray(z)) >= zmax
+    # Within e^(−AT_BOUND) of the bound in the logistic variable: "at the bound" for the
+    # report; its column (still finite) is kept.
+    pinned = np.abs(np.asarray(z)) >= AT_BOUND
     with np.errstate(invalid="ignore", divide="ignore"):
         jac_theta = np.where(at_bound, 0.0, jac / np.where(at_bound, 1.0, dtheta))  # ∂r/∂θ
     jac_rel = jac_theta * theta  # ∂r/∂ln θ: columns comparable across units
@@ -566,9 +606,7 @@ def fit(
                 cost=0.5 * float(r @ r),
             )
         )
-    theta, se, corr, cov, s, chi2, details = _curvature(
-        params, z, r, jac, comparison.noise_known, zmax=ZMAX
-    )
+    theta, se, corr, cov, s, chi2, details = _curvature(params, z, r, jac, comparison.noise_known)
     names = [p.name for p in params]
     adequacy = assess(r, comparison.labels, len(params), comparison.noise_known)
     if comparison.spec.kind == "smooth":  # correlated by construction: no verdict
