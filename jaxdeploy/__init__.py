@@ -7,8 +7,9 @@ The names a user needs, in one place (the submodules behind them may move; these
   `simulate_batch`; step control in `StepControl`;
 * build a mechanism: `Mechanism`, `Body`, the ideal joints `Revolute`, `Prismatic`, `Weld`,
   `AngleDriver`, the clearance joint `RevoluteClearance`, the force elements `Gravity`,
-  `Spring`, `RotationalSpring`, `CoilSpringDrive`, `Latch`, `AppliedForce`, `AppliedTorque`, and
-  `consistent_state` for the initial state; contact laws are in the module `contact`;
+  `Spring`, `RotationalSpring`, `CoilSpringDrive`, `Latch`, `PreloadedLatch`, `AppliedForce`,
+  `AppliedTorque`, and `consistent_state` for the initial state; contact laws are in the
+  module `contact`;
 * identify, design and sweep: the modules `fit` (`fit.fit`, `fit.parameter_jacobian`),
   `optimize` (`optimize.optimize`, `optimize.DesignProblem`) and `sweep` (`sweep.sweep`,
   `sweep.load_sweep`). They are modules, not functions, because `jaxdeploy.fit`,
@@ -62,6 +63,7 @@ _EXPORTS = {
     "RotationalSpring": "jaxdeploy.mechanism",
     "CoilSpringDrive": "jaxdeploy.mechanism",
     "Latch": "jaxdeploy.mechanism",
+    "PreloadedLatch": "jaxdeploy.mechanism",
     "AppliedForce": "jaxdeploy.mechanism",
     "AppliedTorque": "jaxdeploy.mechanism",
     "consistent_state": "jaxdeploy.mechanism",
@@ -80,6 +82,7 @@ __all__ = [  # = _EXPORTS + _MODULES + __version__ (tests/test_public_api.py che
     "Impact",
     "Latch",
     "Mechanism",
+    "PreloadedLatch",
     "Pendulum",
     "Prismatic",
     "Revolute",
@@ -134,6 +137,7 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
         Gravity,
         Latch,
         Mechanism,
+        PreloadedLatch,
         Prismatic,
         Revolute,
         RevoluteClearance,

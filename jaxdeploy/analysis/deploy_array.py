@@ -55,11 +55,12 @@ def lock_time(ts, alpha, lock_angle):
 
 
 @functools.lru_cache(maxsize=4)
-def _ideal_reference_cached(ts_key, t_end, control_key, param_key):
+def _ideal_reference_cached(ts_key, t_end, control_key, param_key, latch):
     from ..scenes.deploy_array import DeployArray
     from ..simulation import simulate
 
-    scene = DeployArray(ideal=True)
+    # The same latch model: the reference differs from the run by its joints only.
+    scene = DeployArray(ideal=True, latch=latch)
     params = scene.resolve_params({k: v for k, v in param_key if k in scene.params})
     mech = scene.build(params)
     tr = simulate(
@@ -72,7 +73,8 @@ def ideal_reference(scene, params, trajectory):
     """The ideal-joint mechanism's trajectory at the same saved times (cached)."""
     ts = tuple(np.asarray(trajectory.ts).tolist())
     shared = tuple(sorted((k, float(v)) for k, v in params.items()))
-    return _ideal_reference_cached(ts, ts[-1], tuple(sorted(scene.default_control.items())), shared)
+    control = tuple(sorted(scene.default_control.items()))
+    return _ideal_reference_cached(ts, ts[-1], control, shared, scene.options["latch"])
 
 
 # The last outputs computed, keyed by the trajectory and mechanism objects themselves: the

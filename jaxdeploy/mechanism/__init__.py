@@ -10,6 +10,7 @@ from .forces import (
     CoilSpringDrive,
     Gravity,
     Latch,
+    PreloadedLatch,
     RotationalSpring,
     Spring,
 )
@@ -40,6 +41,7 @@ __all__ = [
     "Gravity",
     "Kinematics",
     "Latch",
+    "PreloadedLatch",
     "Mechanism",
     "Prismatic",
     "Revolute",

@@ -1,4 +1,5 @@
-"""Force elements: gravity, springs and dampers, the coil-spring drive, applied loads, the latch.
+"""Force elements: gravity, springs and dampers, the coil-spring drive, applied loads, the
+latches (angle-only `Latch`, `PreloadedLatch`).
 
 Forces enter the equations of motion as generalized forces `Q(q, v, t)`; a force `f` at point
 P of body k contributes `(f_x, f_y, (r_P − r_k) × f)` to body k (Nikravesh 1988).
@@ -12,7 +13,7 @@ import jax.numpy as jnp
 
 from .._validation import check_nonnegative, check_positive
 from ._fields import param, static
-from .bodies import GROUND, Kinematics
+from .bodies import GROUND, Kinematics, rotate
 from .element import AbstractElement, Wrench
 from .joints import PointRef
 
@@ -245,6 +246,127 @@ class Latch(AbstractElement):
         puts `½ k_L (α − α_L)²` into the latch at once: energy the discrete engagement adds."""
         alpha, _ = self._angle(kin)
         return memory["engaged"] * 0.5 * self.stiffness * (alpha - self.lock_angle) ** 2
+
+    def bodies(self):
+        return (self.body_a, self.body_b)
+
+
+class PreloadedLatch(AbstractElement):
+    """Deployment latch that holds the hinge angle *and* presses the hinge to one side of its
+    clearance, as the spring-loaded latches of deployable arrays do (a roller or pawl driven
+    by the latch spring into a notch of the hinge fitting; preloading the hinge removes its
+    free play: Lake & Hachkowski, AIAA 2000-1409, "Mechanism design principles for
+    optical-precision, deployable instruments").
+
+    Once engaged (as `Latch`: for good, at the end of the step in which
+    `direction·(α − α_L) ≥ 0`, `α = θ_b − θ_a − angle_offset`) it applies
+
+    * the lock torque of the notch/stop `τ = −k_L (α − α_L) − c_L α̇` on body_b, the reaction
+      on body_a (the latch model of Li, Wang & Huang, *Mech. Syst. Signal Process.* 117 (2019)
+      188: a rotational spring–damper from the lock on);
+    * the latch spring's preload `f = F_p A_r u(φ)`, `u(φ) = (cos φ, sin φ)`, on
+      `preload_body` at its point P (the roller's contact point, body-frame coordinates
+      `preload_point`), with the reaction `−f` on the other body (the roller's carrier, the
+      "roller body" r, whose rotation A_r turns the direction). Its moment about the hinge
+      is taken by the lock torque; its net force is taken by the hinge: an otherwise free
+      journal is pressed into its bearing with F_p along u.
+
+    The roller spring is modelled as a constant force: its rate times the travel left to it
+    once the hinge is seated (at most the hinge clearance, tens of µm) is far below F_p.
+
+    Memory: `engaged` ∈ {0, 1} and `anchor`, P's position at engagement in the roller body's
+    frame (the reference of the preload's potential, so that engaging stores no energy).
+
+    **Arguments:** `body_a`, `body_b`: the hinge's bodies; `lock_angle` α_L [rad];
+    `stiffness` k_L [N m/rad] ≥ 0 (0: the preload alone, for a hinge whose angle another
+    latch holds); `damping` c_L [N m s/rad] ≥ 0; `preload` F_p [N] ≥ 0; `preload_body`
+    (`body_a` or `body_b`); `preload_point` P [m, body frame of `preload_body`];
+    `preload_angle` φ [rad], the direction of the force on `preload_body` in the roller
+    body's frame; `angle_offset` [rad]; `direction` ±1.
+    """
+
+    body_a: str = static()
+    body_b: str = static()
+    lock_angle: float = param()
+    stiffness: float = param()
+    preload: float = param()
+    preload_body: str = static()
+    preload_point: tuple = param()
+    preload_angle: float = param()
+    damping: float = param(default=0.0)
+    angle_offset: float = param(default=0.0)
+    direction: int = static(default=1)
+    has_memory: ClassVar[bool] = True
+    switch_flags: ClassVar[tuple[str, ...]] = ("engaged",)
+
+    def __check_init__(self):
+        check_nonnegative("PreloadedLatch.stiffness", self.stiffness, "N m/rad")
+        check_nonnegative("PreloadedLatch.damping", self.damping, "N m s/rad")
+        check_nonnegative("PreloadedLatch.preload", self.preload, "N")
+        if self.preload_body not in (self.body_a, self.body_b):
+            raise ValueError(
+                f"PreloadedLatch.preload_body = {self.preload_body!r} is invalid; valid: "
+                f"{self.body_a!r} (body_a) or {self.body_b!r} (body_b)"
+            )
+
+    @property
+    def roller_body(self) -> str:
+        return self.body_b if self.preload_body == self.body_a else self.body_a
+
+    def _angle(self, kin: Kinematics):
+        return relative_angle(kin, self.body_a, self.body_b, self.angle_offset)
+
+    def _reached(self, kin: Kinematics):
+        alpha, _ = self._angle(kin)
+        return self.direction * (alpha - self.lock_angle) >= 0
+
+    def _point(self, kin: Kinematics):
+        return kin.position(self.preload_body, self.preload_point)
+
+    def _in_roller_frame(self, kin: Kinematics, world_point):
+        """Body-frame coordinates, in the roller body, of a world point."""
+        theta = kin.angle(self.roller_body)
+        return rotate(-theta, world_point - kin.origin(self.roller_body))
+
+    def _force(self, kin: Kinematics):
+        """`f = F_p A_r u(φ)` on `preload_body` [N]."""
+        u = jnp.stack([jnp.cos(self.preload_angle), jnp.sin(self.preload_angle)])
+        return self.preload * rotate(kin.angle(self.roller_body), u)
+
+    def init_memory(self, kin: Kinematics):
+        return {
+            "engaged": jnp.where(self._reached(kin), 1.0, 0.0),
+            "anchor": self._in_roller_frame(kin, self._point(kin)),
+        }
+
+    def memory_after_step(self, memory, kin: Kinematics, step):
+        engaged = jnp.maximum(memory["engaged"], jnp.where(self._reached(kin), 1.0, 0.0))
+        newly = (engaged > 0.5) & (memory["engaged"] < 0.5)
+        here = self._in_roller_frame(kin, self._point(kin))
+        return {"engaged": engaged, "anchor": jnp.where(newly, here, memory["anchor"])}
+
+    def wrenches(self, kin: Kinematics, t, memory):
+        engaged = memory["engaged"]
+        alpha, rate = self._angle(kin)
+        torque = -self.stiffness * (alpha - self.lock_angle) - self.damping * rate
+        out = _torque_pair(self.body_a, self.body_b, engaged * torque)
+        f = engaged * self._force(kin)
+        p = self._point(kin)
+        out.append(Wrench(self.preload_body, force=f, point=p))
+        if self.roller_body != GROUND:
+            out.append(Wrench(self.roller_body, force=-f, point=p))
+        return out
+
+    def potential_energy(self, kin: Kinematics, memory):
+        """Once engaged, `V = ½ k_L (α − α_L)² − f·(r_P − r_anchor)`, `r_anchor` the world
+        position of the memory's anchor (fixed in the roller body): exact for a roller on the
+        ground, and for a moving roller body up to the rotation of `f` times P's offset from
+        the anchor (µm)."""
+        alpha, _ = self._angle(kin)
+        theta = kin.angle(self.roller_body)
+        anchor = kin.origin(self.roller_body) + rotate(theta, memory["anchor"])
+        work = jnp.dot(self._force(kin), self._point(kin) - anchor)
+        return memory["engaged"] * (0.5 * self.stiffness * (alpha - self.lock_angle) ** 2 - work)
 
     def bodies(self):
         return (self.body_a, self.body_b)

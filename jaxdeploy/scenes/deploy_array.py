@@ -30,6 +30,7 @@ from ..mechanism import (
     CoilSpringDrive,
     Latch,
     Mechanism,
+    PreloadedLatch,
     Revolute,
     RevoluteClearance,
     consistent_state,
@@ -46,6 +47,23 @@ from .base import ParamSpec, Scene
 # rules on this scene; onset does not fail there (no contact begins at rest, same lock time and
 # deviations), so the literature's model stays the default.
 DEFAULT_IMPACT_VELOCITY_RULE = "onset"
+
+# The root latch: "preloaded" holds the hinge angle and presses the root hinge J1 to one side of
+# its clearance with the latch spring's preload (`PreloadedLatch`), as a flight latch does;
+# "angle_only" holds the angle alone (`Latch`), leaving the journal free in its clearance after
+# the lock (the model before issue 24). docs/deploy_array.md shows both and why the default is
+# the preloaded one.
+LATCH_MODELS = ("preloaded", "angle_only")
+DEFAULT_LATCH = "preloaded"
+# Radius at which the latch roller bears on panel 1's root fitting [m]: a 40 mm fitting around
+# the 10 mm hinge pin (our choice; it enters only through the preload's line of action).
+LATCH_ROLLER_RADIUS = 0.02
+LATCH_PRELOAD_PARAMS = (
+    "latch_preload",
+    "latch_preload_angle",
+    "latch_preload_arm",
+    "panel_latch_preload",
+)
 
 INF = math.inf
 
@@ -76,6 +94,28 @@ def _shared_params() -> dict[str, ParamSpec]:
             g["latch"]["k_latch"], 0, INF, "N m/rad", "latch stiffness k_L", False
         ),
         "latch_damping": ParamSpec(g["latch"]["c_latch"], 0, INF, "N m s/rad", "latch damping"),
+        # latch="preloaded" only (docs/deploy_array.md, "The latch"):
+        "latch_preload": ParamSpec(
+            100.0, 0, 1e4, "N", "latch spring preload F_p pressing the root hinge J1"
+        ),
+        "latch_preload_angle": ParamSpec(
+            math.pi,
+            -math.pi,
+            math.pi,
+            "rad",
+            "direction of the preload on panel 1, from +x (π: towards the spacecraft)",
+        ),
+        "panel_latch_preload": ParamSpec(
+            100.0, 0, 1e4, "N", "panel latch preload pressing the panel hinge J7"
+        ),
+        "latch_preload_arm": ParamSpec(
+            0.0,
+            -LATCH_ROLLER_RADIUS,
+            LATCH_ROLLER_RADIUS,
+            "m",
+            "offset e of the preload's line of action from the hinge axis (moment F_p e, "
+            "deploying sense)",
+        ),
         "youngs_modulus": ParamSpec(
             g["contact_defaults"]["material"]["E"], 1e6, 1e13, "Pa", "pin/bearing modulus"
         ),
@@ -103,6 +143,10 @@ class DeployArray(Scene):
     - `impact_velocity_rule`: the damping law's impact velocity, `"onset"` (classical) or
       `"running_max"` (`jaxdeploy.mechanism.RevoluteClearance`).
     - `friction_shape`: the regularised Coulomb law's sign function, `"algebraic"` or `"tanh"`.
+    - `latch`: `"preloaded"` (default: the root latch also presses the root hinge J1 against
+      one side of its clearance with `latch_preload`, and a panel latch presses the panel
+      hinge J7 with `panel_latch_preload`) or `"angle_only"` (one latch holds the angle
+      alone; the journals are free in their clearances after the lock).
     """
 
     name = "deploy_array"
@@ -121,8 +165,11 @@ class DeployArray(Scene):
         normal_law: str = "lankarani_nikravesh",
         impact_velocity_rule: str = DEFAULT_IMPACT_VELOCITY_RULE,
         friction_shape: str = "algebraic",
+        latch: str = DEFAULT_LATCH,
     ):
         check_contact_options(normal_law, impact_velocity_rule, friction_shape)
+        if latch not in LATCH_MODELS:
+            raise ValueError(f"latch = {latch!r} is invalid; valid: {', '.join(LATCH_MODELS)}")
         joints = DEFAULT_CLEARANCE_JOINTS if clearance_joints is None else clearance_joints
         for name in joints:
             if name not in JOINTS:
@@ -134,6 +181,7 @@ class DeployArray(Scene):
         self.normal_law = normal_law
         self.impact_velocity_rule = impact_velocity_rule
         self.friction_shape = friction_shape
+        self.latch = latch
         params = _shared_params()
         ra = GEOMETRY["contact_defaults"]["Ra"]
         c = GEOMETRY["contact_defaults"]["clearance"]
@@ -152,7 +200,13 @@ class DeployArray(Scene):
             "normal_law": self.normal_law,
             "impact_velocity_rule": self.impact_velocity_rule,
             "friction_shape": self.friction_shape,
+            "latch": self.latch,
         }
+
+    def ignored_params(self) -> dict[str, str]:
+        if self.latch == "angle_only":
+            return dict.fromkeys(LATCH_PRELOAD_PARAMS, "latch=preloaded")
+        return {}
 
     def build(self, params):
         p = params
@@ -206,17 +260,59 @@ class DeployArray(Scene):
                 angle_offset=ANGLE_OFFSET,
             )
         )
-        elements.append(
-            Latch(
-                "panel1",
-                "ground",
-                lock_angle=GEOMETRY["latch"]["engage_alpha"],
-                stiffness=p["latch_stiffness"],
-                damping=p["latch_damping"],
-                angle_offset=ANGLE_OFFSET,
-            )
-        )
+        if self.latch == "preloaded":
+            elements.append(self._panel_latch(p))
+        elements.append(self._latch(p))
         return Mechanism(bodies, elements, ground_points=GEOMETRY["bodies"]["ground"]["points"])
+
+    def _latch(self, p):
+        """The root latch (the last element). Preloaded: the roller on the spacecraft bears on
+        panel 1's root fitting at P, at `LATCH_ROLLER_RADIUS` from the hinge axis against the
+        force's direction u(φ) and `latch_preload_arm` e beside it (at the lock pose, where
+        panel 1's frame is the world's, θ = 0): P = root − r_L u + e perp(u), so that the
+        force's moment about the hinge is F_p e in the deploying sense."""
+        common = dict(
+            lock_angle=GEOMETRY["latch"]["engage_alpha"],
+            stiffness=p["latch_stiffness"],
+            damping=p["latch_damping"],
+            angle_offset=ANGLE_OFFSET,
+        )
+        if self.latch == "angle_only":
+            return Latch("panel1", "ground", **common)
+        phi = jnp.asarray(p["latch_preload_angle"], dtype=float)
+        u = jnp.stack([jnp.cos(phi), jnp.sin(phi)])
+        root = jnp.asarray(GEOMETRY["bodies"]["panel1"]["points"]["root"], dtype=float)
+        point = root - LATCH_ROLLER_RADIUS * u + p["latch_preload_arm"] * jnp.stack([-u[1], u[0]])
+        return PreloadedLatch(
+            "panel1",
+            "ground",
+            preload=p["latch_preload"],
+            preload_body="panel1",
+            preload_point=point,
+            preload_angle=phi,
+            **common,
+        )
+
+    def _panel_latch(self, p):
+        """The panel latch at J7 (panel 1 carries the roller, panel 2 the fitting): engages
+        when the fold angle θ_panel2 − θ_panel1 reaches 0 (panels collinear, the same instant
+        as the root latch with ideal joints) and presses J7 with `panel_latch_preload` along
+        the root latch's direction u(φ), now in panel 1's frame, through the hinge axis. Its
+        angular stiffness is 0: the reconstruction's one lock stiffness k_L, calibrated to the
+        95 Hz post-lock mode (docs/deploy_array_geometry.md §7), stands for both latches."""
+        phi = jnp.asarray(p["latch_preload_angle"], dtype=float)
+        u = jnp.stack([jnp.cos(phi), jnp.sin(phi)])
+        root = jnp.asarray(GEOMETRY["bodies"]["panel2"]["points"]["root"], dtype=float)
+        return PreloadedLatch(
+            "panel1",
+            "panel2",
+            lock_angle=0.0,
+            stiffness=0.0,
+            preload=p["panel_latch_preload"],
+            preload_body="panel2",
+            preload_point=root - LATCH_ROLLER_RADIUS * u,
+            preload_angle=phi,
+        )
 
     def initial_state(self, params, mechanism):
         """Half deployed (α = 45°), at rest; journals centred (the ideal pose)."""
