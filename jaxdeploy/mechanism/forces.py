@@ -255,8 +255,8 @@ class PreloadedLatch(AbstractElement):
     """Deployment latch that holds the hinge angle *and* presses the hinge to one side of its
     clearance, as the spring-loaded latches of deployable arrays do (a roller or pawl driven
     by the latch spring into a notch of the hinge fitting; preloading the hinge removes its
-    free play: Lake & Hachkowski, AIAA 2000-1409, "Mechanism design principles for
-    optical-precision, deployable instruments").
+    free play, a design principle of deployable mechanisms: Lake & Hachkowski, AIAA 2000-1409,
+    "Mechanism design principles for optical-precision, deployable instruments", recalled).
 
     Once engaged (as `Latch`: for good, at the end of the step in which
     `direction·(α − α_L) ≥ 0`, `α = θ_b − θ_a − angle_offset`) it applies
