@@ -146,6 +146,7 @@ def figure(results):
 
 
 def main():
+    revision = code_revision()  # before this script writes any tracked file
     results = {}
     for label, latch, overrides in RUNS:
         results[label] = run(latch, overrides)
@@ -165,7 +166,6 @@ def main():
         ("max contact force [N]", "max_contact_force", "{:.0f}"),
     ]
     labels = list(results)
-    revision = code_revision()
     commit = (
         "commit unknown"
         if revision is None
