@@ -133,7 +133,11 @@ def block(results: dict, commit: str) -> str:
         lines.append(
             f"| `{name}` | {status} | {'yes' if report['converged'] else 'no'} | "
             f"{'yes' if report['adequate'] else 'NO'} | {report['reduced_chi2']:.3g} | "
-            f"{p:.2g} | {report['step_control']['rtol']:g} | "
+            f"{p:.2g} | {report['step_control']['rtol']:g}"
+            + {True: "", False: " (floor; 0.2 σ not met)", None: ""}[
+                report["schedule"].get("tolerance", {}).get("met")
+            ]
+            + " | "
             + (", ".join(f"{h * 1e3:.3g}" for h in horizons) or "whole record")
             + f" | {report['iterations']} | {report['wall_time_s']:.0f} | "
             f"{'**yes**' if ok else '**no**'} |"
@@ -145,20 +149,26 @@ def block(results: dict, commit: str) -> str:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, (report, _, _) in results.items():
-        moves = (report.get("tolerance") or {}).get("estimate_change_in_standard_errors", {})
+        check = report.get("tolerance") or {}
+        moves = check.get("estimate_change_in_standard_errors", {})
         for n, est in report["estimates"].items():
             se = report["standard_errors"][n]
             lines.append(
                 f"| `{name}` | `{n}` | {TRUTH[n]:g} | {report['initial_guess'][n]:g} | "
-                f"{est:.6g} | {(est - TRUTH[n]) / TRUTH[n]:+.2%} | {se:.2g} | "
+                f"{est:.6g} | {(est - TRUTH[n]) / TRUTH[n]:+.3%} | {se:.2g} | "
                 f"{report['standard_errors_inflated'][n]:.2g} | {(est - TRUTH[n]) / se:+.2f} | "
-                + (f"{moves[n]:+.2g}" if n in moves else "–")
+                + (f"{moves[n]:+.2g}" if n in moves else check.get("note", "–"))
                 + " |"
             )
-    lines += ["", "Reasons given for the inadequate fits:", ""]
+    lines += ["", "| fit | correlations | singular values of ∂r/∂ln θ | flags |"]
+    lines += ["|---|---|---|---|"]
     for name, (report, _, _) in results.items():
-        for reason in report["adequacy"].get("reasons", []):
-            lines.append(f"* `{name}`: {reason}")
+        names = list(report["estimates"])
+        corr = report["correlation"]
+        pairs = [f"{a}–{b} {corr[a][b]:+.5f}" for i, a in enumerate(names) for b in names[i + 1 :]]
+        singular = ", ".join(f"{s:.3g}" for s in report["singular_values_relative_jacobian"])
+        flags = "; ".join(report["flags"]) or "none"
+        lines.append(f"| `{name}` | {'; '.join(pairs)} | {singular} | {flags} |")
     lines += ["", "Commands (each `jaxdeploy fit`, from the repository root):", "", "```text"]
     lines += [f"jaxdeploy fit {' '.join(argv)}" for argv in commands().values()]
     lines += ["```"]

@@ -409,7 +409,7 @@ def test_cli_fit_recovers_deploy_array_contact_parameters(tmp_path):
         "panel1_clearance=7.5e-5:5e-6:5e-4", "panel1_ra=8e-7:1e-7:1e-5",
         "restitution=0.45:0.05:0.99", "friction_coefficient=0.075:0.001:0.5",
     ]  # fmt: skip
-    assert main(argv) in (0, 1)
+    assert main(argv) in (0, 4)  # 4: a stage stopped at --max-iterations
     report = json.loads((out / "fit.json").read_text())
     for name in ("panel1_clearance", "panel1_ra", "restitution", "friction_coefficient"):
         est, se = report["estimates"][name], report["standard_errors"][name]

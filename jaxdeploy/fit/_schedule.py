@@ -124,7 +124,8 @@ def onset_times(trajectory) -> np.ndarray:
 def impact_horizons(onsets, t_end: float, t_start: float = 0.0) -> list[float]:
     """Horizons through the onsets number FIRST_IMPACTS, 2·FIRST_IMPACTS, … (the midpoint to
     the next onset, so a stage ends in flight); beyond the last of them each horizon at most
-    doubles the elapsed time; then `t_end`. [] for fewer impacts.
+    doubles the elapsed time (skipped when it would leave less than a quarter of itself to
+    `t_end`); then `t_end`. [] for fewer impacts.
 
     The doubling covers impacts the start run does not show: a start 20 % off in c_e or c
     bounces differently, and on issue 20's 12 ms slider-crank record the start run showed
@@ -143,7 +144,9 @@ def impact_horizons(onsets, t_end: float, t_start: float = 0.0) -> list[float]:
         n *= 2
     if not out:
         return []
-    while t_start + 2.0 * (out[-1] - t_start) < t_end:
+    # A doubled horizon that would leave less than a quarter of itself to the record's end
+    # is not worth a stage of its own: the record is next.
+    while t_start + 2.5 * (out[-1] - t_start) < t_end:
         target = t_start + 2.0 * (out[-1] - t_start)
         after = onsets[onsets > target]
         before = onsets[onsets <= target]
