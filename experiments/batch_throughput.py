@@ -413,7 +413,7 @@ def main(argv=None):
         "lanes": lanes,
         "segment_steps": args.segment_steps,
         "two_cores_policy": two_cores,
-        "control": step_control(scene),
+        "control": step_control(scene).settings(),
         "cores": cores,
         "cores_requested": args.cores,
         "versions": run_metadata(),

@@ -49,13 +49,13 @@ init = scene.initial_state(params, mech)
 out["build_and_initial_state"] = time.perf_counter() - t
 for label in ("simulate_first_call", "simulate_second_call"):
     t = time.perf_counter()
-    traj = simulate(mech, init, scene.default_t_end, n_save=2001, **scene.default_control)
+    traj = simulate(mech, init, scene.default_t_end, n_save=2001, control=scene.default_control)
     traj.q.block_until_ready()
     out[label] = time.perf_counter() - t
 out["n_steps"] = int(traj.stats["num_accepted_steps"])
 out["n_rejected"] = int(traj.stats["num_rejected_steps"])
 out["status"] = traj.status()
-out["solver"] = scene.default_control.get("solver", "generalized_alpha")
+out["solver"] = scene.default_control.solver_name()
 t = time.perf_counter()
 ideal_reference(scene, params, traj)
 out["ideal_reference"] = time.perf_counter() - t

@@ -92,7 +92,7 @@ def run_batch(label: str, rerun: bool):
         "wall_time_s": wall,
         "statuses": statuses,
         "stats": stats,
-        "control": {**scene.default_control, **TOLERANCES[label]},
+        "control": scene.default_control.updated(TOLERANCES[label]).to_json(),
         "versions": run_metadata(),
         "varied": list(batch.varied),
     }

@@ -113,7 +113,7 @@ def deploy_compile():
     s0 = scene.initial_state(p, mech)
 
     def run():
-        tr = simulate(mech, s0, 1e-3, n_save=3, **scene.default_control)
+        tr = simulate(mech, s0, 1e-3, n_save=3, control=scene.default_control)
         tr.q.block_until_ready()
 
     cpu0 = time.process_time()

@@ -151,7 +151,7 @@ LONG_T_END = 20.0
 # min per case, so where Kvaerno5 is the comparison on deploy_array, it covers the first 50 ms
 # (release, first hinge impacts), against a run of the checked solver over the same window.
 DEPLOY_KVAERNO5_T_END = 0.05
-DEPLOY_CONTROL = dict(DeployArray.default_control)
+DEPLOY_CONTROL = DeployArray.default_control.settings()
 
 
 def comparison_window(family, control) -> float:

@@ -56,7 +56,7 @@ SUMMARY_KEYS = (
 
 
 def _control(scene, solver, tighter=1.0):
-    control = {k: v for k, v in scene.default_control.items() if k != "solver"}
+    control = {k: v for k, v in scene.default_control.settings().items() if k != "solver"}
     control["rtol"] /= tighter
     control["atol"] /= tighter
     return {**control, "solver": solver}
@@ -216,8 +216,8 @@ def measure(repeats):
     return {
         "solvers": out,
         "t_end": t_end,
-        "control": {k: v for k, v in scene.default_control.items() if k != "solver"},
-        "default_solver": scene.default_control.get("solver", "generalized_alpha"),
+        "control": {k: v for k, v in scene.default_control.settings().items() if k != "solver"},
+        "default_solver": scene.default_control.solver_name(),
         "repeats": repeats,
         "machine": machine_description(),
         "cores": len(os.sched_getaffinity(0)),

@@ -476,7 +476,7 @@ def slider_crank_section():
             mc = scene_c.build(pc)
             ic = scene_c.initial_state(pc, mc)
             t0 = time.perf_counter()
-            traj = simulate(mc, ic, jnp.asarray(t_end), ts=ts, **scene_c.default_control)
+            traj = simulate(mc, ic, jnp.asarray(t_end), ts=ts, control=scene_c.default_control)
             wall = time.perf_counter() - t0
             check_ok(traj, f"clearance slider-crank c={c} E={modulus}")
             x = np.asarray(traj.q[:, 6])

@@ -4,7 +4,9 @@ The names a user needs, in one place (the submodules behind them may move; these
 
 * run a ready-made scene: `get_scene` / `SCENES`, `DeployArray`, `SliderCrank`, `Impact`,
   `Pendulum` (all `Scene`s), then `simulate` → `Trajectory`; many parameter sets at once with
-  `simulate_batch`; step control in `StepControl`;
+  `simulate_batch`; the solver and its step control in one `StepControl`, built once and
+  passed as `control=` to `simulate`, `simulate_batch`, `sweep.sweep`, `fit.fit` and
+  `optimize.DesignProblem` (each scene's default is `scene.default_control`);
 * build a mechanism: `Mechanism`, `Body`, the ideal joints `Revolute`, `Prismatic`, `Weld`,
   `AngleDriver`, the clearance joint `RevoluteClearance`, the force elements `Gravity`,
   `Spring`, `RotationalSpring`, `CoilSpringDrive`, `Latch`, `PreloadedLatch`, `AppliedForce`,
@@ -40,7 +42,7 @@ _EXPORTS = {
     # simulation
     "simulate": "jaxdeploy.simulation",
     "Trajectory": "jaxdeploy.simulation",
-    "StepControl": "jaxdeploy.simulation",
+    "StepControl": "jaxdeploy.solvers",
     "simulate_batch": "jaxdeploy.batch",
     # scenes
     "Scene": "jaxdeploy.scenes",
@@ -147,4 +149,5 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
         consistent_state,
     )
     from .scenes import SCENES, DeployArray, Impact, Pendulum, Scene, SliderCrank, get_scene
-    from .simulation import StepControl, Trajectory, simulate
+    from .simulation import Trajectory, simulate
+    from .solvers import StepControl

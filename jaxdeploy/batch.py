@@ -22,13 +22,23 @@ import numpy as np
 from .lanes import DEFAULT_SEGMENT_STEPS, check_lane_options, check_lanes, simulate_in_lanes
 from .scenes.base import Scene
 from .simulation import Trajectory, simulate
+from .solvers.step_control import FIELDS as STEP_FIELDS
+from .solvers.step_control import StepControl, as_step_control
 
 
-def step_control(scene: Scene, overrides: Mapping | None = None) -> dict:
-    """The scene's default step control updated with `overrides` (keys of `simulate`)."""
-    control = dict(scene.default_control)
-    control.update(overrides or {})
-    return control
+def step_control(scene: Scene, control: StepControl | Mapping | None = None) -> StepControl:
+    """The step control of a run of `scene`: `control` if it is a `StepControl`; otherwise the
+    scene's default (`scene.default_control`) updated with the mapping `control` (field
+    names of `StepControl`, e.g. `{"rtol": 1e-8}`)."""
+    return as_step_control(control, scene.default_control)
+
+
+def _control_and_options(scene, control, simulate_options) -> tuple[StepControl, dict]:
+    """The run's `StepControl` and the rest of `simulate_options`: step settings given as
+    keywords (e.g. `solver=`) override those of `control`."""
+    rest = dict(simulate_options)
+    explicit = {k: rest.pop(k) for k in STEP_FIELDS if k in rest}
+    return step_control(scene, control).updated(explicit), rest
 
 
 def run_scene(
@@ -38,21 +48,21 @@ def run_scene(
     *,
     ts=None,
     n_save: int = 1001,
-    control: Mapping | None = None,
+    control: StepControl | Mapping | None = None,
     **simulate_options,
 ) -> Trajectory:
     """Simulate `scene` with `params` (a complete mapping, e.g. from `scene.resolve_params`).
 
-    Pure in `params`: values may be JAX tracers (under `jit`, `grad`, `vmap`). The step
-    control is the scene's default updated with `control`; `simulate_options` go to
-    `simulate` (e.g. `solver`, `adjoint`, `progress`).
+    Pure in `params`: values may be JAX tracers (under `jit`, `grad`, `vmap`). `control`: a
+    `StepControl`, or a mapping of its fields overriding the scene's default
+    (`step_control`); `simulate_options` go to `simulate` (e.g. `adjoint`, `progress`; a
+    step setting such as `solver=` among them overrides `control`'s).
     """
     t_end = scene.default_t_end if t_end is None else t_end
+    control, options = _control_and_options(scene, control, simulate_options)
     mechanism = scene.build(params)
     initial = scene.initial_state(params, mechanism)
-    # An explicit option (e.g. `solver=`) overrides the scene's default step control.
-    options = {**step_control(scene, control), **simulate_options}
-    return simulate(mechanism, initial, t_end, ts=ts, n_save=n_save, **options)
+    return simulate(mechanism, initial, t_end, ts=ts, n_save=n_save, control=control, **options)
 
 
 @dataclass(frozen=True)
@@ -120,7 +130,7 @@ def batch_function(
     t_end: float,
     ts,
     *,
-    control: Mapping | None = None,
+    control: StepControl | Mapping | None = None,
     evaluate=None,
     group_size: int | None = None,
     lanes: int | None = None,
@@ -163,7 +173,8 @@ def batch_function(
         return trajectory if evaluate is None else (trajectory, evaluate(params, trajectory))
 
     if lanes is not None:
-        options = {**step_control(scene, control), **simulate_options}
+        resolved, options = _control_and_options(scene, control, simulate_options)
+        options["control"] = resolved
         check_lane_options(options)
 
         def prepare(varied_values):
@@ -226,7 +237,7 @@ def simulate_batch(
     fixed: Mapping | None = None,
     ts=None,
     n_save: int = 1001,
-    control: Mapping | None = None,
+    control: StepControl | Mapping | None = None,
     group_size: int | None = None,
     lanes: int | None = None,
     segment_steps: int = DEFAULT_SEGMENT_STEPS,

@@ -19,7 +19,12 @@ def main(argv=None) -> int:
     for module in discover():
         module.add_arguments(sub.add_parser(module.NAME, help=module.HELP))
         runners[module.NAME] = module.run
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:
+        # argparse has printed the usage error (exit code 2) or the help (0); return the code
+        # so that callers of `main` (tests, scripts) see it like any other refusal.
+        return exit_.code
     enable_compilation_cache()
     return runners[args.command](args)
 

@@ -4,6 +4,7 @@ produced it (parameters, versions, the code's git revision)."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 import subprocess
@@ -73,18 +74,29 @@ def atomic_savefig(fig, path: str, **kwargs) -> None:
 
 
 def _jsonable(value):
+    """`value` as strict JSON data: arrays and numpy scalars as lists and numbers, a
+    non-finite float (NaN, ±inf: no JSON number) as None."""
     if isinstance(value, dict):
         return {str(k): _jsonable(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
         return [_jsonable(v) for v in value]
     if hasattr(value, "shape") or isinstance(value, np.generic):
         arr = np.asarray(value)
-        return arr.item() if arr.ndim == 0 else arr.tolist()
+        return _jsonable(arr.item() if arr.ndim == 0 else arr.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
     return value
 
 
+def strict_json(obj, **options) -> str:
+    """`obj` as strict JSON text (RFC 8259: null where a number is NaN or infinite, never the
+    bare `NaN`/`Infinity` Python's json writes by default)."""
+    return json.dumps(_jsonable(obj), allow_nan=False, **options)
+
+
 def atomic_write_json(path: str, obj) -> None:
-    atomic_write_bytes(path, (json.dumps(_jsonable(obj), indent=2) + "\n").encode())
+    """Write `obj` as strict JSON (`strict_json`), atomically."""
+    atomic_write_bytes(path, (strict_json(obj, indent=2) + "\n").encode())
 
 
 def atomic_write_npz(path: str, **arrays) -> None:
@@ -159,9 +171,24 @@ def run_metadata() -> dict:
 
 def check_output_dir(path: str, overwrite: bool) -> None:
     """Refuse (`FileExistsError`) a non-empty existing folder unless `overwrite`; a file in
-    the way is refused too. Creates nothing, so it can run before any work is done."""
+    the way (the path itself or any folder above it) is refused too, and so is a path that
+    cannot be created (no write permission, an empty or malformed name). Creates nothing, so
+    it can run before any work is done."""
+    if not isinstance(path, str) or not path.strip() or "\0" in path:
+        raise FileExistsError(f"output path {path!r} is invalid: give a folder name")
     if os.path.exists(path) and not os.path.isdir(path):
         raise FileExistsError(f"output path {path!r} exists and is not a folder")
+    # The nearest existing folder above `path` is where makedirs would start: it must be a
+    # folder (not a file) we may write into.
+    ancestor = os.path.dirname(os.path.abspath(path))
+    while not os.path.exists(ancestor):
+        ancestor = os.path.dirname(ancestor)
+    if not os.path.isdir(ancestor):
+        raise FileExistsError(
+            f"output path {path!r} is invalid: {ancestor!r} above it is a file, not a folder"
+        )
+    if not os.path.isdir(path) and not os.access(ancestor, os.W_OK | os.X_OK):
+        raise FileExistsError(f"output path {path!r} cannot be created: {ancestor!r} is read-only")
     if os.path.isdir(path) and _results_in(path) and not overwrite:
         raise FileExistsError(
             f"output folder {path!r} already holds results; pass --overwrite to replace them "
@@ -187,3 +214,19 @@ def prepare_output_dir(path: str, overwrite: bool) -> None:
     for name in os.listdir(path):
         if _is_partial_write(name):
             os.remove(os.path.join(path, name))
+
+
+def default_output_dir(command: str, label: str, root: str = "results") -> str:
+    """A fresh folder name for a command's results when the user gives none:
+    `results/COMMAND/LABEL-YYYYMMDD-HHMMSS` (local time), with `-2`, `-3`, ... appended if that
+    exists already, so that runs of different commands, or of the same command one after
+    another, never write into the same folder."""
+    import time
+
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    base = os.path.join(root, command, f"{label}-{stamp}")
+    path, n = base, 1
+    while os.path.exists(path):
+        n += 1
+        path = f"{base}-{n}"
+    return path

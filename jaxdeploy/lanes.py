@@ -65,6 +65,7 @@ from .solvers.wrapped_controller import WrappedController
 # The options of `simulate` a lane-refilled batch accepts (the rest concern differentiation or
 # display: `replay_steps`, `adjoint`, `progress`).
 LANE_OPTIONS = (
+    "control",
     "t0",
     "dt",
     "rtol",

@@ -39,9 +39,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .batch import run_scene, simulate_batch
+from .batch import run_scene, simulate_batch, step_control
 from .objectives import Deployment, Objective, ideal_lock_time
 from .scenes.base import Scene
+from .solvers.step_control import StepControl
 
 # Machinable ranges (SI): turned and reamed/ground hinge surfaces span Ra 0.2–6.3 µm (the
 # ISO 1302 preferred series from 0.2 to 6.3), radial clearances of fitted pins 5–150 µm.
@@ -116,7 +117,8 @@ class DesignProblem:
     - `fixed`: other parameter values (defaults otherwise).
     - `ideal_scene`: the reference mechanism (default `type(scene)(ideal=True)` when the
       scene has that option; `None` otherwise: deviations are the raw channels).
-    - `control`: step-control overrides.
+    - `control`: a `StepControl` for every run (the design's and the ideal reference's), or a
+      mapping of its fields overriding each scene's default.
     - `adjoint`: a diffrax adjoint for derivatives (default reverse mode with checkpointing;
       `diffrax.ForwardMode()` for forward mode, cheaper for a few parameters).
     """
@@ -130,14 +132,16 @@ class DesignProblem:
         n_save: int = 1601,
         fixed: Mapping | None = None,
         ideal_scene: Scene | None | str = "auto",
-        control: Mapping | None = None,
+        control: StepControl | Mapping | None = None,
         lock_angle: float | None = None,
         adjoint=None,
     ):
         self.scene, self.objective, self.t_end = scene, objective, float(t_end)
         self.adjoint = adjoint
         self.fixed = scene.resolve_params(fixed)
-        self.control = dict(control or {})
+        self.control = control if isinstance(control, StepControl) else dict(control or {})
+        # The design runs' step control, resolved (what results record).
+        self.step_control = step_control(scene, self.control)
         self.ts = np.linspace(0.0, self.t_end, n_save)
         if ideal_scene == "auto":
             ideal_scene = type(scene)(ideal=True) if hasattr(scene, "ideal") else None
@@ -337,7 +341,8 @@ def expected_objective(batch: Callable, x: Mapping, scatter: Scatter, rng) -> di
 
 @dataclass
 class OptimizeResult:
-    """History of an optimisation: per iteration the design, J, dJ/dx and the parts."""
+    """History of an optimisation: per iteration the design, J, dJ/dx and the parts, and
+    whether it succeeded (`status`)."""
 
     names: tuple[str, ...]
     x: list = field(default_factory=list)
@@ -347,26 +352,37 @@ class OptimizeResult:
     wall_time: list = field(default_factory=list)
     ok: list = field(default_factory=list)
     stochastic: bool = False
+    # "ok", or why the run stopped short (an iteration whose simulation, objective or gradient
+    # was not finite: the last iterate is then that failed one).
+    status: str = "ok"
 
     @property
-    def best(self) -> int:
-        """The last iterate for a stochastic (smoothed) run, whose objective values are noisy
-        estimates; otherwise the iterate with the lowest successful objective."""
-        if self.stochastic:
-            return len(self.x) - 1
-        values = np.where(np.asarray(self.ok), np.asarray(self.objective), np.inf)
-        return int(np.argmin(values))
+    def best(self) -> int | None:
+        """The iterate with the lowest objective among the successful ones (finite J and
+        gradient), or None if none succeeded. For a smoothed objective the values compared
+        are the per-iteration estimates of E[J] (2M samples each), so the choice carries
+        their noise."""
+        values = np.asarray(self.objective, dtype=float)
+        good = np.asarray(self.ok, dtype=bool) & np.isfinite(values)
+        if not good.any():
+            return None
+        return int(np.argmin(np.where(good, values, np.inf)))
 
     @property
-    def optimum(self) -> dict[str, float]:
-        return dict(self.x[self.best])
+    def optimum(self) -> dict[str, float] | None:
+        """The best iterate's design (`best`), or None."""
+        return None if self.best is None else dict(self.x[self.best])
 
     def to_json(self) -> dict:
+        best = self.best
         return {
             "names": list(self.names),
+            "status": self.status,
             "optimum": self.optimum,
-            "optimum_objective": self.objective[self.best],
-            "optimum_iteration": self.best,
+            "optimum_objective": None if best is None else self.objective[best],
+            "optimum_iteration": best,
+            "last": self.x[-1] if self.x else None,
+            "last_objective": self.objective[-1] if self.x else None,
             "stochastic": self.stochastic,
             "history": [
                 {
@@ -410,8 +426,10 @@ def optimize(
     - `optimizer`: an optax `GradientTransformation` (default `optax.adam(learning_rate)`).
     - `callback(i, result)`: called after each evaluation (progress display).
 
-    **Returns:** `OptimizeResult`; `.optimum` is the best successful iterate (for a smoothed
-    objective, whose values are noisy estimates: the last iterate).
+    **Returns:** `OptimizeResult`; `.optimum` is the best successful iterate (lowest J),
+    `.status` "ok" or, when an iteration's simulation, J or gradient is not finite, a message
+    naming it: the run stops there (a step from a NaN gradient would make every later
+    iterate NaN) and returns what it found before.
     """
     import optax
 
@@ -472,14 +490,16 @@ def optimize(
         result.parts.append(parts)
         result.ok.append(ok)
         result.wall_time.append(time.perf_counter() - start)
+        if not (ok and math.isfinite(value)):
+            result.ok[-1] = False
+            result.status = (
+                f"failed at iteration {i} (x = {x}): the simulation, the objective or its "
+                "gradient is not finite"
+            )
         if callback is not None:
             callback(i, result)
-        if i == steps - 1:
+        if i == steps - 1 or result.status != "ok":
             break
-        if not ok:
-            raise RuntimeError(
-                f"optimize: iteration {i} at {x} failed (simulation or gradient not finite)"
-            )
         updates, state = optimizer.update(jnp.asarray(grad_u), state, u)
         u = optax.apply_updates(u, updates)
     return result

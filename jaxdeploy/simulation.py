@@ -8,7 +8,7 @@ status that says when and why a run failed (never silent NaN).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import NamedTuple
 
 import diffrax as dfx
@@ -16,9 +16,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
-from ._validation import check_nonnegative, check_positive, check_range, is_concrete
+from ._validation import is_concrete
 from .mechanism import ConsistentState, Mechanism
 from .solvers import (
     GeneralizedAlpha,
@@ -26,51 +25,12 @@ from .solvers import (
     MechanismODESolver,
     MechanismState,
     MechanismTerm,
-    solver_by_name,
+    StepControl,
     state_norm,
 )
+from .solvers.step_control import DEFAULT_MAX_STEPS
 
-
-@dataclass(frozen=True)
-class StepControl:
-    """How steps are chosen (static: changing it recompiles; the step `dt` itself is data).
-
-    Fixed step: no tolerances. Adaptive: `rtol` and `atol` (positions in m and rad, velocities
-    in m/s and rad/s) with `dt_min`/`dt_max` as bounds.
-    """
-
-    rtol: float | None = None
-    atol: float | None = None
-    dt_min: float | None = None
-    dt_max: float | None = None
-    max_steps: int = 2_000_000
-    # Error norm; `simulate` uses `state_norm` (positions and velocities only).
-    norm: object = None
-
-    @property
-    def adaptive(self) -> bool:
-        return self.rtol is not None or self.atol is not None
-
-    def controller(self):
-        """The diffrax step-size controller. Tolerances and step bounds are arrays, so they
-        are data of the compiled program: changing them does not recompile."""
-        if not self.adaptive:
-            return dfx.ConstantStepSize()
-
-        def data(x):
-            return None if x is None else jnp.asarray(x, dtype=float)
-
-        # PI coefficients suited to stiff problems (diffrax's `PIDController` docstring).
-        return dfx.PIDController(
-            rtol=data(1e-6 if self.rtol is None else self.rtol),
-            atol=data(1e-9 if self.atol is None else self.atol),
-            pcoeff=0.3,
-            icoeff=0.4,
-            dtmin=data(self.dt_min),
-            dtmax=data(self.dt_max),
-            factormax=5.0,
-            norm=optx.rms_norm if self.norm is None else self.norm,
-        )
+__all__ = ["StepControl", "Trajectory", "simulate"]
 
 
 class Trajectory(eqx.Module):
@@ -105,25 +65,6 @@ class Trajectory(eqx.Module):
         finite = np.isfinite(ts) & np.all(np.isfinite(np.asarray(self.q)), axis=-1)
         t_reached = float(ts[finite].max()) if finite.any() else float("nan")
         return f"failed after t = {t_reached:.6g} s: {dfx.RESULTS[self.result]}"
-
-
-def _check_step_control(rtol, atol, dt_min, dt_max, max_steps):
-    """Refuse step-control settings no solver can honour, naming the value and the range."""
-    if rtol is not None:
-        check_range("rtol", rtol, 0.0, 1.0, low_inclusive=False, high_inclusive=False)
-    if atol is not None:
-        check_positive("atol", atol)
-    if dt_min is not None:
-        check_nonnegative("dt_min", dt_min, "s")
-    if dt_max is not None:
-        check_positive("dt_max", dt_max, "s")
-    if dt_min is not None and dt_max is not None and is_concrete((dt_min, dt_max)):
-        if float(dt_min) > float(dt_max):
-            raise ValueError(
-                f"dt_min = {dt_min!r} s is invalid: it must be ≤ dt_max = {dt_max!r} s"
-            )
-    if not (isinstance(max_steps, int) and max_steps > 0):
-        raise ValueError(f"max_steps = {max_steps!r} is invalid: it must be a positive integer")
 
 
 class ReplaySteps(dfx.AbstractStepSizeController):
@@ -276,13 +217,14 @@ def simulate(
     initial: ConsistentState,
     t_end: float,
     *,
+    control: StepControl | None = None,
     t0: float = 0.0,
     dt: float | None = None,
     rtol: float | None = None,
     atol: float | None = None,
     dt_min: float | None = None,
     dt_max: float | None = None,
-    max_steps: int = 2_000_000,
+    max_steps: int = DEFAULT_MAX_STEPS,
     n_save: int = 1001,
     ts=None,
     solver=None,
@@ -295,6 +237,10 @@ def simulate(
     """Integrate `mechanism` from `initial` (a `consistent_state`) to `t_end`.
 
     **Arguments:**
+    - `control`: a `StepControl` (solver, tolerances, steps, event location), built once and
+      shared with `simulate_batch`, `sweep`, `fit` and `optimize`. Or, instead of it, its
+      fields as keywords (`solver`, `rtol`, `atol`, `dt`, `dt_min`, `dt_max`, `max_steps`,
+      `locate_events`), described below; giving both is refused.
     - `dt`: fixed step [s] (alone), or the first step of an adaptive run.
     - `rtol`, `atol`: adaptive step on the solver's error estimate (positions and velocities).
     - `n_save` / `ts`: output times (default: `n_save` equally spaced).
@@ -335,6 +281,7 @@ def simulate(
         mechanism,
         initial,
         t_end,
+        control=control,
         t0=t0,
         dt=dt,
         rtol=rtol,
@@ -392,13 +339,14 @@ def _setup(
     initial,
     t_end,
     *,
+    control=None,
     t0=0.0,
     dt=None,
     rtol=None,
     atol=None,
     dt_min=None,
     dt_max=None,
-    max_steps=2_000_000,
+    max_steps=DEFAULT_MAX_STEPS,
     n_save=1001,
     ts=None,
     solver=None,
@@ -410,20 +358,21 @@ def _setup(
     """Validate `simulate`'s arguments and build its solver, step-size controller, initial
     state and times (shared with the lane-refilled batches of `jaxdeploy.lanes`, which must
     integrate every case exactly as `simulate` does)."""
-    _check_step_control(rtol, atol, dt_min, dt_max, max_steps)
-    if isinstance(solver, str):
-        solver = solver_by_name(solver, rtol=rtol, atol=atol)
-    # Both paths control the positions and velocities (the integrated variables) alone.
-    control = StepControl(rtol, atol, dt_min, dt_max, max_steps, state_norm)
-    if dt is None and not control.adaptive:
-        raise ValueError("give dt (fixed step) or rtol/atol (adaptive step)")
-    if dt is None:
-        dt = 1e-6 if dt_max is None else min(1e-6, dt_max)
-    if not dt > 0:
-        raise ValueError(f"dt = {dt!r} is invalid: it must be > 0 (s)")
+    control = _step_control(
+        control,
+        solver=solver,
+        rtol=rtol,
+        atol=atol,
+        dt=dt,
+        dt_min=dt_min,
+        dt_max=dt_max,
+        max_steps=max_steps,
+        locate_events=locate_events,
+    )
+    solver = control.make_solver()
+    dt_min, locate_events = control.dt_min, control.locate_events
     # The step is data, not part of the compiled program: changing it does not recompile.
-    dt0 = jnp.asarray(dt, dtype=float)
-    solver = GeneralizedAlpha() if solver is None else solver
+    dt0 = jnp.asarray(control.first_step(), dtype=float)
     if not control.adaptive and isinstance(solver, GeneralizedAlpha):
         solver = replace(solver, estimate_error=False)
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
@@ -432,7 +381,8 @@ def _setup(
     ts = _save_times(t0, t_end, n_save, ts)
     # Times are data too: a new t_end or t0 does not recompile.
     t0, t_end = jnp.asarray(t0, dtype=float), jnp.asarray(t_end, dtype=float)
-    controller = control.controller()
+    # Both paths control the positions and velocities (the integrated variables) alone.
+    controller = control.controller(state_norm)
     if step_ts is not None:
         if not control.adaptive:
             raise ValueError("step_ts needs adaptive steps (give rtol/atol)")
@@ -456,6 +406,24 @@ def _setup(
     return _Setup(
         y0, t0, t_end, dt0, ts, solver, controller, control.max_steps, adjoint, step_times
     )
+
+
+def _step_control(control, **keywords) -> StepControl:
+    """`simulate`'s step control: `control`, or a `StepControl` of its keyword arguments
+    (never both: which would win is a guess)."""
+    if control is None:
+        return StepControl(**{k: v for k, v in keywords.items() if v is not None})
+    given = [k for k, v in keywords.items() if v is not None]
+    given = [k for k in given if k != "max_steps" or keywords[k] != DEFAULT_MAX_STEPS]
+    given = [k for k in given if k != "locate_events" or keywords[k] is not True]
+    if not isinstance(control, StepControl):
+        raise TypeError(f"control = {control!r} is invalid: it must be a StepControl")
+    if given:
+        raise ValueError(
+            f"control= and {', '.join(f'{k}=' for k in given)} given together: put every "
+            "step setting in the StepControl (e.g. control.replace(rtol=1e-8))"
+        )
+    return control
 
 
 def _saved(ys: MechanismState) -> tuple:

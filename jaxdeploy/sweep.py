@@ -40,9 +40,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._validation import check_positive
 from .batch import _stack_cases, batch_function, step_control
-from .io import atomic_write_json, atomic_write_npz, run_metadata
+from .io import atomic_write_json, atomic_write_npz, check_output_dir, run_metadata
 from .scenes.base import Scene
+from .solvers.step_control import StepControl
 
 MANIFEST = "manifest.json"
 # How each chunk is batched (`parse_policy`), measured in docs/batch_throughput.md: lanes
@@ -90,6 +92,17 @@ def _policy_options(policy: dict) -> dict:
     return {}
 
 
+def chunk_shape(chunk_size: int, n_cases: int, n_devices: int) -> int:
+    """Cases per compiled chunk: `chunk_size` rounded up to a multiple of the device count, but
+    no more than the sweep needs, rounded up to a power of two per device. A small sweep then
+    runs a few padded copies instead of a full chunk of them (3 cases: 4 slots, not 64), and
+    chunk shapes come from a short list (powers of two), so the compiled program of one shape
+    serves every later sweep of the scene that needs it (persistent compilation cache)."""
+    per_device = math.ceil(chunk_size / n_devices)
+    needed = 2 ** math.ceil(math.log2(max(math.ceil(n_cases / n_devices), 1)))
+    return n_devices * min(per_device, needed)
+
+
 def grid_cases(grid: Mapping[str, list]) -> dict[str, np.ndarray]:
     """The Cartesian product of `grid` `{name: values}` as `{name: (B,) array}`, the last name
     varying fastest."""
@@ -109,22 +122,12 @@ def _definition(scene, grid, fixed, t_end, n_save, control, chunk_size, features
         "fixed": {k: float(v) for k, v in (fixed or {}).items()},
         "t_end": float(t_end),
         "n_save": int(n_save),
-        "control": {k: _control_value(v) for k, v in control.items()},
+        "control": control.to_json(),
         "chunk_size": int(chunk_size),
         "features": features,
         # The policy can change a case's round-off and so its steps (jaxdeploy.lanes).
         "policy": policy,
     }
-
-
-def _control_value(value):
-    """A step-control entry as JSON: numbers as floats, a solver by its name or its repr (a
-    deterministic description, so that resuming with another solver is refused)."""
-    if value is None or isinstance(value, str):
-        return value
-    if isinstance(value, int | float):
-        return float(value)
-    return repr(value)
 
 
 def _read_manifest(path):
@@ -163,7 +166,7 @@ def sweep(
     t_end: float | None = None,
     n_save: int = 201,
     fixed: Mapping | None = None,
-    control: Mapping | None = None,
+    control: StepControl | Mapping | None = None,
     chunk_size: int = DEFAULT_CHUNK_SIZE,
     policy: str = DEFAULT_POLICY,
     resume: bool = False,
@@ -178,8 +181,10 @@ def sweep(
 
     **Arguments:**
     - `grid`: `{name: [values]}`; `fixed`: other parameters (defaults otherwise).
+    - `control`: a `StepControl` for every case (or a mapping of its fields overriding the
+      scene's default); recorded in the manifest's definition.
     - `chunk_size`: cases per compiled run (bounds memory; rounded up to a multiple of the
-      device count).
+      device count, and down to what the sweep needs: `chunk_shape`).
     - `policy`: how a chunk's cases are batched on each device (`parse_policy`): `"lanes:L"`
       (default `DEFAULT_POLICY`), `"groups:G"` or `"all"`. Recorded in the definition: it
       can change a case's round-off and hence its steps.
@@ -194,6 +199,9 @@ def sweep(
     **Returns:** the manifest (a dict).
     """
     t_end = scene.default_t_end if t_end is None else float(t_end)
+    check_positive("t_end", t_end, "s")
+    if not (isinstance(n_save, int) and not isinstance(n_save, bool) and n_save >= 2):
+        raise ValueError(f"n_save = {n_save!r} is invalid: it must be an integer ≥ 2")
     control = step_control(scene, control)
     if not (isinstance(chunk_size, int) and chunk_size >= 1):
         raise ValueError(f"chunk_size = {chunk_size!r} is invalid: it must be an integer ≥ 1")
@@ -206,7 +214,7 @@ def sweep(
         first = next(iter(grid))
         varied, shared = (first,), {k: v for k, v in shared.items() if k != first}
     sharding, n_devices = _device_mesh()
-    chunk_size = n_devices * math.ceil(chunk_size / n_devices)
+    chunk_size = chunk_shape(chunk_size, n_cases, n_devices)
     definition = _definition(
         scene, grid, fixed, t_end, n_save, control, chunk_size, features, parsed_policy
     )
@@ -233,6 +241,7 @@ def sweep(
                 f"output folder {out_dir!r} is not empty and holds no sweep manifest; choose "
                 "another --out"
             )
+        check_output_dir(out_dir, overwrite=False)  # a file in the way, a read-only folder
         manifest = {
             "definition": definition,
             "n_cases": n_cases,
@@ -244,8 +253,9 @@ def sweep(
             "versions": run_metadata(),
             "chunks": [],
         }
-        if writer:
-            atomic_write_json(manifest_path, manifest)
+        # Written with the first finished chunk, not now: a sweep that fails before finishing
+        # one (a case the scene cannot assemble, an interrupt while compiling) leaves no
+        # manifest behind to block the corrected rerun.
 
     done = {c["index"] for c in manifest["chunks"] if _chunk_done(out_dir, c)}
     manifest["chunks"] = [c for c in manifest["chunks"] if c["index"] in done]
@@ -294,6 +304,8 @@ def sweep(
             "wall_time_s": time.perf_counter() - began,
         }
         if writer:
+            if not os.path.exists(manifest_path):  # the sweep's first chunk: define it first
+                atomic_write_json(manifest_path, manifest)
             atomic_write_npz(os.path.join(out_dir, record["file"]), **arrays)
             manifest["chunks"].append(record)
             manifest["chunks"].sort(key=lambda c: c["index"])

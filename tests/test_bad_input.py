@@ -71,8 +71,8 @@ def test_cli_refuses_unknown_names_with_the_valid_ones(tmp_path, capsys, no_solv
 
 
 def test_cli_refuses_non_numbers_and_bad_times(tmp_path, capsys, no_solver):
-    with pytest.raises(SystemExit, match="'abc' is not a number"):
-        main(["simulate", "pendulum", "--set", "length=abc", "--out", str(tmp_path / "a")])
+    assert main(["simulate", "pendulum", "--set", "length=abc", "--out", str(tmp_path / "a")]) == 2
+    assert "'abc' is not a number" in capsys.readouterr().err
     for t_end in ("0", "-1", "nan", "inf"):
         out = tmp_path / f"t{t_end}"
         assert main(["simulate", "pendulum", "--t-end", t_end, "--out", str(out)]) == 2

@@ -51,7 +51,7 @@ def ideal_run():
     params = scene.resolve_params()
     mech = scene.build(params)
     tr = simulate(
-        mech, scene.initial_state(params, mech), 1.0, n_save=2001, **scene.default_control
+        mech, scene.initial_state(params, mech), 1.0, n_save=2001, control=scene.default_control
     )
     return mech, tr
 
@@ -127,7 +127,7 @@ def test_small_clearance_and_roughness_approach_the_ideal_mechanism(ideal_run):
             scene.initial_state(params, mech),
             0.5,
             ts=ideal_tr.ts[:1001],
-            **scene.default_control,
+            control=scene.default_control,
         )
         assert tr.ok, tr.status()
         alpha = np.asarray(deployment_angle(tr.q))

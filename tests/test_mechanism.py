@@ -132,7 +132,9 @@ def test_clearance_mechanism_converges_to_ideal_as_clearance_shrinks():
         # constant compiled into each.
         p = scene.resolve_params({"clearance": jnp.asarray(c)})
         mech = scene.build(p)
-        tr = simulate(mech, scene.initial_state(p, mech), period, ts=ts, **scene.default_control)
+        tr = simulate(
+            mech, scene.initial_state(p, mech), period, ts=ts, control=scene.default_control
+        )
         assert tr.ok, tr.status()
         deviations.append(np.max(np.abs(np.asarray(tr.q[:, 6]) - x_ideal)))
     # The slider can deviate from the ideal by at most about the clearance plus contact

@@ -56,6 +56,48 @@ def test_adam_finds_an_interior_optimum_and_stops_at_the_bound():
     assert result.optimum["panel1_ra"] <= 6.3e-6
 
 
+def test_the_best_iterate_is_returned_not_the_last():
+    # A large Adam step overshoots the bowl's minimum: the iterates oscillate about it, so
+    # the last is not the lowest; the result is the lowest, whatever its position.
+    target = {"panel1_ra": 1.6e-6, "panel1_clearance": 5e-5}
+    start = {"panel1_ra": 0.3e-6, "panel1_clearance": 1e-5}
+    result = optimize(_log_quadratic(target), start, BOUNDS, steps=12, learning_rate=2.0)
+    values = np.asarray(result.objective)
+    assert result.status == "ok" and result.best == int(np.argmin(values))
+    assert result.best != len(values) - 1, "the test needs an overshooting last step"
+    assert result.optimum == result.x[result.best]
+    record = result.to_json()
+    assert record["optimum_objective"] == min(values) < record["last_objective"]
+
+
+def test_a_nan_objective_stops_the_run_with_a_failed_status_and_keeps_the_best():
+    # A batch loss (called once per iteration, in Python) whose "simulation" fails from the
+    # fourth iteration on: NaN.
+    calls = []
+    bounds = {"panel1_ra": MACHINABLE["ra"]}
+
+    def batch(designs):
+        calls.append(None)
+        x = np.asarray(designs["panel1_ra"])
+        values = (np.log(x) - math.log(1.6e-6)) ** 2
+        if len(calls) > 3:
+            values = np.full_like(values, np.nan)
+        return values, {}, np.isfinite(values)
+
+    smoothing = Scatter(relative={"panel1_ra": 0.05}, pairs=2, seed=1)
+    result = optimize(batch, {"panel1_ra": 0.5e-6}, bounds, steps=10, smoothing=smoothing)
+    assert result.status.startswith("failed at iteration 3")
+    assert len(result.x) == 4 and result.ok == [True, True, True, False]
+    assert result.best is not None and result.best < 3
+    record = result.to_json()
+    assert record["status"] != "ok" and record["optimum"] == result.x[result.best]
+    # Every iterate failing: no optimum, said so.
+    calls.clear()
+    calls.extend([None] * 10)
+    failed = optimize(batch, {"panel1_ra": 0.5e-6}, bounds, steps=10, smoothing=smoothing)
+    assert failed.status != "ok" and failed.best is None and failed.optimum is None
+
+
 def test_smoothed_gradient_of_a_quadratic_matches_its_closed_form():
     """J(y) = a·y + ½ Σ b_k y_k², y = (ln x_1, x_2): E[J(y + sξ)] = J(y) + ½ Σ b_k s_k² and
     ∇E[J(y + sξ)] = a + b y exactly; the estimator's error is statistical (checked at 5 σ)."""
@@ -134,6 +176,12 @@ def test_optimize_command_refuses_bad_input_before_running(tmp_path, capsys):
         (["--param", "restitution=0.9:0.1"], "low < high"),
         (["--objective", "panel1:loudness=1"], "unknown"),
         (["--start", "restitution=0.5"], "not a design parameter"),
+        (["--start", "panel1_ra=1e-5"], "--start panel1_ra = 1e-05 is invalid"),
+        (["--start", "panel1_ra=1e-6", "--start", "panel1_ra=2e-6"], "given twice"),
+        (["--learning-rate", "-1"], "--learning-rate = -1 is invalid"),
+        (["--steps", "0"], "--steps = 0 is invalid"),
+        (["--param", "panel1_ra", "--param", "panel1_ra"], "--param panel1_ra is given twice"),
+        (["--param", "panel1_ra", "--set", "panel1_ra=1e-6"], "both a design parameter"),
     ]
     for extra, message in cases:
         assert main(["optimize", "--out", out, *extra]) == 2

@@ -69,19 +69,35 @@ def test_grid_parsing_and_case_order():
     np.testing.assert_allclose(grid["c"], [1e-6, 1e-5, 1e-4], rtol=1e-12)
     cases = grid_cases({"a": [1, 2], "b": [10, 20, 30]})
     assert list(cases["a"]) == [1, 1, 1, 2, 2, 2] and list(cases["b"]) == [10, 20, 30] * 2
-    with pytest.raises(SystemExit, match="LOW:HIGH:N"):
+    with pytest.raises(ValueError, match="LOW:HIGH:N"):
         parse_grid(["a=1:2"])
+    with pytest.raises(ValueError, match="--grid a is given twice"):
+        parse_grid(["a=1,2", "a=3"])
+    with pytest.raises(ValueError, match="both swept .* and fixed"):
+        parse_grid(["a=1,2"], fixed={"a": 1.0})
+
+
+def test_chunks_hold_no_more_padding_than_a_power_of_two():
+    from jaxdeploy.sweep import chunk_shape
+
+    assert chunk_shape(64, 3, 1) == 4  # a 3-case sweep: 4 slots, not 64
+    assert chunk_shape(64, 1, 1) == 1
+    assert chunk_shape(64, 200, 1) == 64  # large sweeps keep the chunk size
+    assert chunk_shape(4, 24, 4) == 4  # one case per device and chunk
+    assert chunk_shape(64, 10, 4) == 16  # 3 cases per device -> 4
+    # Few shapes: every sweep of up to 64 cases on one device uses one of 7.
+    assert {chunk_shape(64, n, 1) for n in range(1, 65)} == {1, 2, 4, 8, 16, 32, 64}
 
 
 def test_sweep_definition_records_the_solver():
     # A solver given by name (or as an object) is part of the definition, so resuming a sweep
     # with another solver is refused; numbers stay numbers.
-    from jaxdeploy.solvers import GeneralizedAlpha
-    from jaxdeploy.sweep import _control_value
+    from jaxdeploy.solvers import GeneralizedAlpha, StepControl
 
-    assert _control_value("tsit5") == "tsit5"
-    assert _control_value(1e-6) == 1e-6 and _control_value(None) is None
-    assert _control_value(GeneralizedAlpha(newton="full")) != _control_value(GeneralizedAlpha())
+    record = StepControl("tsit5", rtol=1e-6, atol=1e-9).to_json()
+    assert record["solver"] == "tsit5" and record["rtol"] == 1e-6 and record["dt"] is None
+    full = StepControl(GeneralizedAlpha(newton="full"), dt=1e-3).to_json()
+    assert full["solver"] != StepControl(GeneralizedAlpha(), dt=1e-3).to_json()["solver"]
 
 
 def test_sweep_killed_and_resumed_on_four_devices(tmp_path):
@@ -109,7 +125,9 @@ def test_sweep_killed_and_resumed_on_four_devices(tmp_path):
         _command(killed, "--resume"), env=env, capture_output=True, text=True, timeout=600
     )
     assert resumed.returncode == 0, resumed.stderr
-    assert "24/24 cases in 6 chunks" in resumed.stdout
+    assert resumed.stdout == "", "--quiet prints nothing"
+    resumed_manifest = json.loads((killed / "manifest.json").read_text())
+    assert len(resumed_manifest["chunks"]) == 6 and resumed_manifest["n_cases"] == 24
 
     a, b = load_sweep(full), load_sweep(killed)  # load_sweep raises on a duplicated case
     assert list(a["case"]) == list(range(24)) and list(b["case"]) == list(range(24))

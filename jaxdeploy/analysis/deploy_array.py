@@ -55,7 +55,7 @@ def lock_time(ts, alpha, lock_angle):
 
 
 @functools.lru_cache(maxsize=4)
-def _ideal_reference_cached(ts_key, t_end, control_key, param_key, latch):
+def _ideal_reference_cached(ts_key, t_end, control, param_key, latch):
     from ..scenes.deploy_array import DeployArray
     from ..simulation import simulate
 
@@ -64,7 +64,7 @@ def _ideal_reference_cached(ts_key, t_end, control_key, param_key, latch):
     params = scene.resolve_params({k: v for k, v in param_key if k in scene.params})
     mech = scene.build(params)
     tr = simulate(
-        mech, scene.initial_state(params, mech), t_end, ts=np.array(ts_key), **dict(control_key)
+        mech, scene.initial_state(params, mech), t_end, ts=np.array(ts_key), control=control
     )
     return np.asarray(tr.q), np.asarray(tr.qdd), tr.status()
 
@@ -73,8 +73,10 @@ def ideal_reference(scene, params, trajectory):
     """The ideal-joint mechanism's trajectory at the same saved times (cached)."""
     ts = tuple(np.asarray(trajectory.ts).tolist())
     shared = tuple(sorted((k, float(v)) for k, v in params.items()))
-    control = tuple(sorted(scene.default_control.items()))
-    return _ideal_reference_cached(ts, ts[-1], control, shared, scene.options["latch"])
+    # A StepControl is frozen and hashable: it keys the cache as it is.
+    return _ideal_reference_cached(
+        ts, ts[-1], scene.default_control, shared, scene.options["latch"]
+    )
 
 
 # The last outputs computed, keyed by the trajectory and mechanism objects themselves: the
@@ -201,7 +203,7 @@ def plot_deploy_array(scene, params, mechanism, trajectory, out_dir) -> list[str
                 d = o[f"{panel}_{where}_deviation"][:, col] * 1e6
                 ax.plot(ts, d, style, lw=0.7, label=where)
             ax.set_title(f"{panel}: {axis_name} displacement deviation")
-            ax.set_ylabel("µm")
+            ax.set_ylabel("deviation [µm]")
             ax.grid(alpha=0.3)
             ax.legend(fontsize=8)
     for ax in axes[-1]:
@@ -213,7 +215,7 @@ def plot_deploy_array(scene, params, mechanism, trajectory, out_dir) -> list[str
         acc_y = o[f"{panel}_acceleration"][:, 1]
         axes[row, 0].plot(ts, acc_y, lw=0.5)
         axes[row, 0].set_title(f"{panel}: Y acceleration of the centre")
-        axes[row, 0].set_ylabel("m/s²")
+        axes[row, 0].set_ylabel("a_y [m/s²]")
         axes[row, 0].set_xlabel("time [s]")
         mean_acc_y, starts = o[f"{panel}_mean_acceleration"][:, 1], ts[:-1]
         for phase, mask in (("unfolding", starts < t_lock), ("post-lock", starts >= t_lock)):
@@ -222,19 +224,19 @@ def plot_deploy_array(scene, params, mechanism, trajectory, out_dir) -> list[str
                 axes[row, 1].semilogy(f, psd + 1e-30, lw=0.7, label=phase)
         axes[row, 1].set_xlim(0, min(500.0, 0.5 / float(ts[1] - ts[0])))
         axes[row, 1].set_title(f"{panel}: Welch spectrum, interval-mean Y acc.")
-        axes[row, 1].set_ylabel("(m/s²)²/Hz")
+        axes[row, 1].set_ylabel("PSD of a_y [(m/s²)²/Hz]")
         axes[row, 1].set_xlabel("frequency [Hz]")
         axes[row, 1].legend(fontsize=8)
     save(fig, "panel_acceleration_spectra.png")
 
     if o["joints"]:
         fig, axes = plt.subplots(
-            len(o["joints"]), 1, figsize=(7, 2.6 * len(o["joints"])), squeeze=False
+            len(o["joints"]), 1, figsize=(7, 2.6 * len(o["joints"])), squeeze=False, sharex=True
         )
         for ax, (owner, h) in zip(axes[:, 0], o["joints"].items(), strict=True):
             ax.plot(ts, np.asarray(h["normal_force"]), lw=0.6)
             ax.set_title(f"{owner} hinge: normal contact force")
-            ax.set_ylabel("N")
+            ax.set_ylabel("normal force [N]")
             ax.grid(alpha=0.3)
         axes[-1, 0].set_xlabel("time [s]")
         save(fig, "contact_forces.png")

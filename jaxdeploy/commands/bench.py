@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import sys
 
+from ._args import integer_at_least, positive
+
 NAME = "bench"
 HELP = "benchmarks: work-precision (error against wall time) of solvers and peers"
 SCENES = ("slider_crank", "deploy_array")
@@ -19,11 +21,21 @@ def add_arguments(parser) -> None:
     wp.add_argument("scene", nargs="?", default="slider_crank", help=f"one of {SCENES}")
     wp.add_argument("--out", default=None, help="output folder (default results/bench_SCENE)")
     wp.add_argument("--quick", action="store_true", help="short horizon, few configurations")
-    wp.add_argument("--repeats", type=int, default=3, help="timed runs per configuration")
-    wp.add_argument("--t-end", type=float, default=None, help="horizon [s] (default: scene's)")
+    wp.add_argument(
+        "--repeats",
+        type=integer_at_least("--repeats", 1),
+        default=3,
+        help="timed runs per configuration, ≥ 1",
+    )
+    wp.add_argument(
+        "--t-end",
+        type=positive("--t-end", "s"),
+        default=None,
+        help="horizon [s], > 0 (default: scene's)",
+    )
     wp.add_argument(
         "--budget",
-        type=float,
+        type=positive("--budget", "s"),
         default=None,
         help="wall-time limit [s] per configuration, each run in a worker process (default: "
         f"{DEFAULT_BUDGET_S} for a scene listed there, else none); one over it is reported "

@@ -18,7 +18,17 @@ from __future__ import annotations
 
 import sys
 
-from . import SCENE_OPTION_HELP, parse_pairs
+from ._args import (
+    SCENE_OPTION_HELP,
+    SET_HELP,
+    add_step_control,
+    check_used,
+    integer_at_least,
+    parse_assignments,
+    parse_pairs,
+    positive,
+    step_control,
+)
 
 NAME = "fit"
 EXIT_OK, EXIT_FAILED, EXIT_REFUSED, EXIT_INADEQUATE, EXIT_NOT_CONVERGED = 0, 1, 2, 3, 4
@@ -36,14 +46,10 @@ def add_arguments(parser) -> None:
         metavar="NAME[=guess[:low:high]]",
         help="parameters to fit (SI units); default guess: scene default, bounds guess/10..x10",
     )
-    parser.add_argument("--out", required=True, help="output folder")
     parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="fixed value of another scene parameter",
+        "--out", default=None, help="output folder (default results/fit/SCENE-DATE-TIME)"
     )
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
     parser.add_argument(
         "--scene-option",
         action="append",
@@ -70,8 +76,12 @@ def add_arguments(parser) -> None:
         help="pointwise residuals, block means (a low-pass feature) or Gaussian-smoothed "
         "channels (--width)",
     )
-    parser.add_argument("--block", type=float, default=None, help="block duration [s]")
-    parser.add_argument("--width", type=float, default=None, help="smoothing width [s]")
+    parser.add_argument(
+        "--block", type=positive("--block", "s"), default=None, help="block duration [s], > 0"
+    )
+    parser.add_argument(
+        "--width", type=positive("--width", "s"), default=None, help="smoothing width [s], > 0"
+    )
     parser.add_argument(
         "--widths",
         default=None,
@@ -94,33 +104,24 @@ def add_arguments(parser) -> None:
         "through the 4th, 8th, 16th, ... impact of the model at the start, then the whole "
         "record (none without impacts, or with --window or --widths)",
     )
-    parser.add_argument("--max-iterations", type=int, default=30)
+    parser.add_argument(
+        "--max-iterations",
+        type=integer_at_least("--max-iterations", 1),
+        default=30,
+        help="Levenberg–Marquardt trial steps per stage, ≥ 1",
+    )
     parser.add_argument(
         "--starts",
-        type=int,
+        type=integer_at_least("--starts", 0),
         default=0,
         metavar="N",
         help="global first stage: simulate N Latin-hypercube points within the bounds (one "
         "batch) and start from the best (default 0: start from the guess)",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of the --starts sample")
-    parser.add_argument(
-        "--rtol",
-        type=float,
-        default=None,
-        help="model step control (default: chosen at the start point so that the model's "
-        "error is below 0.2 noise levels RMS; needs stated noise levels)",
-    )
-    parser.add_argument("--atol", type=float, default=None)
-    parser.add_argument("--dt-max", type=float, default=None)
-    parser.add_argument(
-        "--dt",
-        type=float,
-        default=None,
-        help="fixed model step [s] (a loss smooth in the parameters)",
-    )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing result")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    add_step_control(parser)
 
 
 def _fail(message: str, code: int = EXIT_REFUSED) -> int:
@@ -128,7 +129,34 @@ def _fail(message: str, code: int = EXIT_REFUSED) -> int:
     return code
 
 
+def _noise(items, names) -> dict:
+    """`--noise [CHANNEL=]SIGMA` items as `{channel: σ}`; a bare SIGMA applies to every
+    channel. A malformed item or σ ≤ 0 raises `ValueError` naming the flag."""
+    import math
+
+    noise = {}
+    for item in items:
+        key, sep, value = item.rpartition("=")
+        try:
+            sigma = float(value)
+        except ValueError:
+            raise ValueError(
+                f"--noise {item!r}: expected [CHANNEL=]SIGMA, SIGMA a number"
+            ) from None
+        if not (math.isfinite(sigma) and sigma > 0):
+            raise ValueError(
+                f"--noise {item!r}: SIGMA = {value} is invalid: it must be in (0, inf)"
+            )
+        if sep:
+            noise[key.strip()] = sigma
+        else:
+            noise.update(dict.fromkeys(names, sigma))
+    return noise
+
+
 def _windows(items):
+    import math
+
     out = []
     for item in items:
         parts = item.split(":")
@@ -136,6 +164,8 @@ def _windows(items):
             t0, t1 = (float(p) for p in parts)
         except ValueError:
             raise ValueError(f"--window {item!r}: expected T0:T1 in seconds") from None
+        if not (math.isfinite(t0) and math.isfinite(t1) and t0 < t1):
+            raise ValueError(f"--window {item!r}: T0 and T1 must be finite with T0 < T1")
         out.append((t0, t1))
     return tuple(out) or None
 
@@ -206,18 +236,18 @@ def run(args) -> int:
     import os
     import time
 
-    from ..fit import MeasurementError, check_not_ignored, fit, load_measurements, make_parameters
+    from ..fit import MeasurementError, fit, load_measurements, make_parameters
     from ..fit._plots import plot_fit
     from ..io import (
         atomic_write_bytes,
         atomic_write_json,
         atomic_write_npz,
         check_output_dir,
+        default_output_dir,
         prepare_output_dir,
         run_metadata,
     )
     from ..scenes import get_scene
-    from .simulate import parse_assignments
 
     try:
         scene = get_scene(args.scene, **parse_pairs(args.scene_option, "--scene-option"))
@@ -228,41 +258,20 @@ def run(args) -> int:
         if args.channels:
             data = data.select([c.strip() for c in args.channels.split(",") if c.strip()])
         if args.noise:
-            noise = {}
-            for item in args.noise:
-                if "=" in item:
-                    key, value = item.split("=", 1)
-                    noise[key.strip()] = float(value)
-                else:
-                    noise.update({n: float(item) for n in data.names})
-            data = data.with_noise(noise)
+            data = data.with_noise(_noise(args.noise, data.names))
         assignments = parse_assignments(args.set)
-        for name in assignments:
-            check_not_ignored(scene, name, "set")
         fixed = scene.resolve_params(assignments)
         params = make_parameters(scene, args.params, fixed)
+        check_used(scene, assignments, "--set")
         stages = _stages(args, data)
     except (MeasurementError, ValueError) as err:
         return _fail(str(err))
-    if args.max_iterations < 1:
-        return _fail(f"--max-iterations = {args.max_iterations} is invalid: it must be >= 1")
-    if args.starts < 0:
-        return _fail(f"--starts = {args.starts} is invalid: it must be >= 0")
-    control = {}
-    if args.dt is not None:
-        if not args.dt > 0:
-            return _fail(f"--dt = {args.dt} is invalid: it must be > 0 (s)")
-        control = {"rtol": None, "atol": None, "dt_max": None, "dt_min": None, "dt": args.dt}
-    for key in ("rtol", "atol", "dt_max"):
-        value = getattr(args, key)
-        if value is not None:
-            if not value > 0:
-                return _fail(f"--{key.replace('_', '-')} = {value} is invalid: it must be > 0")
-            control[key] = value
     # Refusals happen before the folder is created and before anything is compiled.
     try:
-        check_output_dir(args.out, args.overwrite)
-    except FileExistsError as err:
+        control = step_control(args, scene)
+        out = args.out or default_output_dir("fit", scene.name)
+        check_output_dir(out, args.overwrite)
+    except (ValueError, FileExistsError) as err:
         return _fail(str(err))
 
     names = [p.name for p in params]
@@ -289,9 +298,7 @@ def run(args) -> int:
                 control, record = choose_tolerance(scene, start, full, control)
             else:
                 control, record = control, {}
-                record["trajectory"] = run_channels(
-                    scene, start, full.ts, full.names, {**scene.default_control, **control}
-                )[1]
+                record["trajectory"] = run_channels(scene, start, full.ts, full.names, control)[1]
         except ValueError as err:
             return _fail(str(err))
         except RuntimeError as err:
@@ -308,7 +315,7 @@ def run(args) -> int:
                 stages = _stages(args, data)
         if not args.quiet:
             print(
-                f"model tolerance: rtol {control.get('rtol')}, atol {control.get('atol')}; "
+                f"model tolerance: rtol {control.rtol}, atol {control.atol}; "
                 f"horizons: {schedule.get('horizons') or 'whole record'}",
                 file=sys.stderr,
             )
@@ -339,10 +346,10 @@ def run(args) -> int:
         return _fail(str(err), EXIT_FAILED)
     tolerance_check(result, scene, fixed, control)
     wall = time.perf_counter() - start_time
-    prepare_output_dir(args.out, args.overwrite)
+    prepare_output_dir(out, args.overwrite)
     # fit.json is written last and marks a complete result: drop an old one first.
-    if os.path.exists(os.path.join(args.out, "fit.json")):
-        os.unlink(os.path.join(args.out, "fit.json"))
+    if os.path.exists(os.path.join(out, "fit.json")):
+        os.unlink(os.path.join(out, "fit.json"))
 
     report = result.report()
     report.update(
@@ -351,7 +358,7 @@ def run(args) -> int:
         data=args.data,
         channels=list(data.names),
         noise_levels=result.comparison.sigma,
-        step_control={**scene.default_control, **control},
+        step_control=control.to_json(),
         params={**fixed, **result.estimates},
         seed=args.seed if args.starts else None,
         randomness=(
@@ -370,7 +377,7 @@ def run(args) -> int:
             f"{h['stage']},{h['iteration']},{h['cost']!r},{int(h['accepted'])},{h['step']!r},"
             + ",".join(repr(h["params"][n]) for n in names)
         )
-    atomic_write_bytes(f"{args.out}/history.csv", ("\n".join(rows) + "\n").encode())
+    atomic_write_bytes(f"{out}/history.csv", ("\n".join(rows) + "\n").encode())
     cmp_ = result.comparison
     first = result.comparison_initial
     arrays = {"t": cmp_.times, "t_initial": first.times}
@@ -378,43 +385,45 @@ def run(args) -> int:
         arrays[f"data_{n}"] = cmp_.data_features[n]
         arrays[f"initial_{n}"] = first.features_np(result.model_initial[n])
         arrays[f"fitted_{n}"] = cmp_.features_np(result.model_final[n])
-    atomic_write_npz(f"{args.out}/fit.npz", **arrays)
-    figures = plot_fit(result, args.out)
-    atomic_write_json(f"{args.out}/fit.json", report)
+    atomic_write_npz(f"{out}/fit.npz", **arrays)
+    figures = plot_fit(result, out)
+    atomic_write_json(f"{out}/fit.json", report)
 
+    # --quiet prints nothing; the exit code still tells ok / inadequate / not converged.
+    say = print if not args.quiet else (lambda *args, **kwargs: None)
     width = max(len(n) for n in names)
-    print(
+    say(
         f"{'parameter':<{width}}  {'estimate':>12}  {'std. error':>11}  {'rel.':>7}"
         f"  {'x sqrt(chi2/dof)':>16}"
     )
     for n in names:
         rel = result.relative_errors()[n]
-        print(
+        say(
             f"{n:<{width}}  {result.estimates[n]:12.6g}  {result.standard_errors[n]:11.3g}"
             f"  {rel:7.2%}  {result.standard_errors_inflated[n]:16.3g}"
         )
-    print(
+    say(
         f"chi2/dof = {result.reduced_chi2:.3g} ({result.n_residuals} residuals, noise "
         f"{report['noise']}); {result.iterations} LM trial steps; {result.message}"
     )
     for flag in result.flags():
-        print(f"warning: {flag}")
+        say(f"warning: {flag}")
     tol = result.tolerance or {}
     if "estimate_change_in_standard_errors" in tol:
         moves = ", ".join(
             f"{n} {v:+.2g}" for n, v in tol["estimate_change_in_standard_errors"].items()
         )
-        print(
+        say(
             f"tolerance check (rtol {tol['rtol']:g} -> {tol['rtol_check']:g}): model moves "
             f"{tol['rms_model_change_over_sigma']:.2g} noise levels RMS; a refit would move "
             f"the estimates by [{moves}] standard errors"
         )
-    print(f"wrote {args.out}/fit.json, history.csv, fit.npz, " + ", ".join(figures))
-    print(f"converged: {'yes' if result.converged else 'NO'} ({result.message})")
+    say(f"wrote {out}/fit.json, history.csv, fit.npz, " + ", ".join(figures))
+    say(f"converged: {'yes' if result.converged else 'NO'} ({result.message})")
     if result.adequate:
-        print("adequate: yes (chi2/dof consistent with the stated noise, white residuals)")
+        say("adequate: yes (chi2/dof consistent with the stated noise, white residuals)")
         return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
-    print(
+    say(
         "adequate: NO -- the model does not explain the data; the estimates may be biased "
         "far beyond their standard errors (see residuals.png, residual_autocorrelation.png)"
     )

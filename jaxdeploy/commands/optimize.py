@@ -1,12 +1,22 @@
-"""`jaxdeploy optimize --scene deploy_array --objective SPEC --out DIR`: choose parameters
+"""`jaxdeploy optimize --scene deploy_array --objective SPEC [--out DIR]`: choose parameters
 (default: per-panel hinge roughness and clearance) within machinable bounds by gradient steps
-(optax), writing the optimum, the objective history and plots (see `jaxdeploy.optimize`)."""
+(optax), writing the best design found, the objective history and its plot (see
+`jaxdeploy.optimize`)."""
 
 from __future__ import annotations
 
 import sys
 
-from . import SOLVER_HELP, solver_control
+from ._args import (
+    SET_HELP,
+    add_step_control,
+    check_used,
+    integer_at_least,
+    parse_assignments,
+    positive,
+    refuse,
+    step_control,
+)
 
 NAME = "optimize"
 HELP = "choose Ra, clearance (or any parameter) by gradients on a deployment objective"
@@ -28,15 +38,33 @@ def add_arguments(parser) -> None:
         action="append",
         default=[],
         metavar="NAME[=LOW:HIGH]",
-        help="design parameter and bounds (SI); *_ra, *_clearance default to the machinable "
-        "range. Default: " + ", ".join(DEFAULT_PARAMS),
+        help="design parameter and bounds (SI, LOW < HIGH; each NAME once); *_ra, *_clearance "
+        "default to the machinable range. Default: " + ", ".join(DEFAULT_PARAMS),
     )
-    parser.add_argument("--start", action="append", default=[], metavar="NAME=VALUE")
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
-    parser.add_argument("--t-end", type=float, default=0.75, help="horizon [s] (default 0.75)")
-    parser.add_argument("--n-save", type=int, default=1501, help="saved states")
-    parser.add_argument("--steps", type=int, default=12, help="gradient evaluations")
-    parser.add_argument("--learning-rate", type=float, default=0.25, help="Adam step (in u)")
+    parser.add_argument(
+        "--start",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="start value of a design parameter, strictly inside its bounds (default: the "
+        "scene's value, or the bounds' centre when that lies outside them)",
+    )
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
+    parser.add_argument(
+        "--t-end", type=positive("--t-end", "s"), default=0.75, help="horizon [s] (default 0.75)"
+    )
+    parser.add_argument(
+        "--n-save", type=integer_at_least("--n-save", 2), default=1501, help="saved states, ≥ 2"
+    )
+    parser.add_argument(
+        "--steps", type=integer_at_least("--steps", 1), default=12, help="gradient evaluations"
+    )
+    parser.add_argument(
+        "--learning-rate",
+        type=positive("--learning-rate"),
+        default=0.25,
+        help="Adam step in the reparametrised coordinate u, > 0",
+    )
     parser.add_argument(
         "--gradient",
         choices=("smoothed", "pathwise"),
@@ -47,103 +75,154 @@ def add_arguments(parser) -> None:
     # deploy_array's objectives are rough below about half a unit of ln Ra (contact events
     # shift with the design): smoothing at s = 0.1 follows that roughness, at 0.5 the trend
     # (docs/design.md, "Gradient-based optimum").
-    parser.add_argument("--smoothing", type=float, default=0.5, help="s in ln x (smoothed)")
-    parser.add_argument("--pairs", type=int, default=4, help="antithetic pairs per step")
+    parser.add_argument(
+        "--smoothing", type=positive("--smoothing"), default=0.5, help="s in ln x (smoothed), > 0"
+    )
+    parser.add_argument(
+        "--pairs", type=integer_at_least("--pairs", 1), default=4, help="antithetic pairs per step"
+    )
     parser.add_argument(
         "--robust",
         action="store_true",
         help="minimise E[J] under manufacturing scatter (--tol-ra, --tol-clearance)",
     )
-    parser.add_argument("--tol-ra", type=float, default=0.25, help="Ra log-normal s")
-    parser.add_argument("--tol-clearance", type=float, default=5e-6, help="clearance σ [m]")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", required=True, help="output folder")
+    parser.add_argument(
+        "--tol-ra", type=positive("--tol-ra"), default=0.25, help="Ra log-normal s, > 0"
+    )
+    parser.add_argument(
+        "--tol-clearance",
+        type=positive("--tol-clearance", "m"),
+        default=5e-6,
+        help="clearance σ [m], > 0",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of the smoothing draws")
+    parser.add_argument(
+        "--out", default=None, help="output folder (default results/optimize/SCENE-DATE-TIME)"
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing result")
-    parser.add_argument("--solver", default=None, metavar="NAME", help=SOLVER_HELP)
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    add_step_control(parser)
 
 
 def _parse_params(items, scene, machinable):
+    import math
+
     names = {}
     for item in items or DEFAULT_PARAMS:
         name, sep, text = item.partition("=")
         name = name.strip()
         if name not in scene.params:
             raise ValueError(
-                f"unknown parameter {name!r} for scene {scene.name!r}; valid: "
+                f"--param: unknown parameter {name!r} for scene {scene.name!r}; valid: "
                 + ", ".join(sorted(scene.params))
             )
+        if name in names:
+            raise ValueError(f"--param {name} is given twice")
         if sep:
             try:
                 low, high = (float(v) for v in text.split(":"))
             except ValueError:
                 raise ValueError(f"--param {item!r}: expected NAME=LOW:HIGH") from None
+            if not (math.isfinite(low) and math.isfinite(high) and low < high):
+                raise ValueError(
+                    f"--param {item!r}: bounds must be finite with low < high"
+                ) from None
             names[name] = (low, high)
         else:
             names[name] = machinable(scene, [name])[name]
     return names
 
 
-def run(args) -> int:
+def _start(scene, bounds, defaults, start):
+    """The start design: `--start` values (refused outside the bounds), else the scene's
+    value, moved to the bounds' centre when it lies outside them (said in `notes`)."""
     import math
+
+    x0, notes = {}, []
+    for name, value in start.items():
+        if name not in bounds:
+            raise ValueError(f"--start {name}: not a design parameter ({', '.join(bounds)})")
+        lo, hi = bounds[name]
+        if not lo < value < hi:
+            raise ValueError(
+                f"--start {name} = {value:g} is invalid: it must lie strictly inside the "
+                f"bounds ({lo:g}, {hi:g}) {scene.params[name].unit}".rstrip()
+            )
+    for name, (lo, hi) in bounds.items():
+        value = start.get(name, defaults[name])
+        if not lo < value < hi:
+            centre = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
+            notes.append(
+                f"{name}: the scene's value {value:g} lies outside the bounds ({lo:g}, {hi:g}); "
+                f"starting at their {'geometric ' if lo > 0 else ''}centre {centre:g}"
+            )
+            value = centre
+        x0[name] = value
+    return x0, notes
+
+
+def run(args) -> int:
     import time
 
-    import diffrax as dfx
-
-    from ..io import atomic_write_json, check_output_dir, prepare_output_dir, run_metadata
+    from ..io import check_output_dir, default_output_dir
     from ..objectives import parse_objective
-    from ..optimize import (
-        BatchObjective,
-        Box,
-        DesignProblem,
-        Scatter,
-        machinable_bounds,
-        optimize,
-    )
+    from ..optimize import Box, machinable_bounds
     from ..scenes import SCENES, get_scene
-    from .simulate import parse_assignments
 
+    # Every refusal happens here, before anything is written or compiled (the ideal
+    # reference run of `DesignProblem` is a simulation: it comes after).
     if args.scene not in SCENES:
-        print(f"error: unknown scene {args.scene!r}; valid: {', '.join(SCENES)}", file=sys.stderr)
-        return 2
+        return refuse(f"unknown scene {args.scene!r}; valid: {', '.join(sorted(SCENES))}")
     scene = get_scene(args.scene)
     try:
         objective = parse_objective(args.objective or ["paper"])
         bounds = _parse_params(args.param, scene, machinable_bounds)
         Box(bounds)
         fixed = parse_assignments(args.set)
-        start = parse_assignments(args.start)
-        for name in start:
-            if name not in bounds:
-                raise ValueError(f"--start {name}: not a design parameter ({', '.join(bounds)})")
+        both = sorted(set(fixed) & set(bounds))
+        if both:
+            raise ValueError(f"{both[0]} is both a design parameter (--param) and fixed (--set)")
+        start = parse_assignments(args.start, "--start")
         defaults = scene.resolve_params(fixed)
-        x0 = {}
-        for name, (lo, hi) in bounds.items():
-            value = start.get(name, defaults[name])
-            if not lo < value < hi:  # the default outside the box: start at its log-centre
-                value = math.sqrt(lo * hi) if lo > 0 else 0.5 * (lo + hi)
-            x0[name] = value
-        control = solver_control(scene, args.solver)
-        if args.steps < 1:
-            raise ValueError(f"--steps = {args.steps}: must be ≥ 1")
-        if not args.t_end > 0:
-            raise ValueError(f"--t-end = {args.t_end}: must be > 0 (s)")
-        check_output_dir(args.out, args.overwrite)  # refuse before any work
+        check_used(scene, fixed, "--set")
+        check_used(scene, bounds, "--param")
+        x0, notes = _start(scene, bounds, defaults, start)
+        for name, value in x0.items():  # the start must be a valid scene parameter too
+            scene.resolve_params({**fixed, name: value})
+        control = step_control(args, scene)
+        out = args.out or default_output_dir("optimize", scene.name)
+        check_output_dir(out, args.overwrite)
     except (ValueError, FileExistsError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
-
+        return refuse(str(err))
+    if not args.quiet:
+        for note in notes:
+            print(f"note: {note}", file=sys.stderr)
     began = time.perf_counter()
+    return _optimize(args, scene, objective, bounds, fixed, x0, control, out, began)
+
+
+def _optimize(args, scene, objective, bounds, fixed, x0, control, out, began) -> int:
+    import time
+
+    import diffrax as dfx
+
+    from ..io import atomic_write_json, prepare_output_dir, run_metadata
+    from ..optimize import BatchObjective, DesignProblem, Scatter, optimize
+
     pathwise = args.gradient == "pathwise" and not args.robust
-    problem = DesignProblem(
-        scene,
-        objective,
-        args.t_end,
-        n_save=args.n_save,
-        fixed=fixed,
-        control=control,
-        adjoint=dfx.ForwardMode() if pathwise else None,
-    )
+    try:
+        problem = DesignProblem(
+            scene,
+            objective,
+            args.t_end,
+            n_save=args.n_save,
+            fixed=fixed,
+            control=control,
+            adjoint=dfx.ForwardMode() if pathwise else None,
+        )
+    except (RuntimeError, ValueError) as err:  # the ideal reference failed or did not lock
+        print(f"error: {err}", file=sys.stderr)
+        return 1
     smoothing = None
     if args.robust:
         ra = {n: args.tol_ra for n in scene.params if n.endswith("_ra")}
@@ -163,34 +242,36 @@ def run(args) -> int:
         if args.quiet:
             return
         x = ", ".join(f"{k}={v:.4g}" for k, v in result.x[-1].items())
+        elapsed = time.perf_counter() - began
+        # The first iteration includes compilation; later ones are alike, so the ETA uses them.
+        per_step = sum(result.wall_time[1:]) / max(len(result.wall_time) - 1, 1)
+        eta = per_step * (args.steps - i - 1) if i > 0 else float("nan")
+        eta_text = "" if eta != eta else f", ETA {eta:.0f} s"
         print(
             f"[{i + 1}/{args.steps}] J = {result.objective[-1]:.5g}  {x}  "
-            f"({result.wall_time[-1]:.1f} s)",
+            f"(iteration {result.wall_time[-1]:.1f} s, elapsed {elapsed:.0f} s{eta_text})",
             file=sys.stderr,
             flush=True,
         )
 
-    try:
-        result = optimize(
-            loss,
-            x0,
-            bounds,
-            steps=args.steps,
-            learning_rate=args.learning_rate,
-            smoothing=smoothing,
-            callback=progress,
-        )
-        status = "ok"
-    except RuntimeError as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 1
+    result = optimize(
+        loss,
+        x0,
+        bounds,
+        steps=args.steps,
+        learning_rate=args.learning_rate,
+        smoothing=smoothing,
+        callback=progress,
+    )
     record = {
         "scene": args.scene,
+        "status": result.status,
         "objective": [f"{t.label}={t.weight}" for t in objective.terms],
         "gradient": "pathwise" if pathwise else ("robust" if args.robust else "smoothed"),
         "bounds": bounds,
+        "units": {name: scene.params[name].unit for name in bounds},
         "start": x0,
-        "t_end": args.t_end,
+        "t_end_s": args.t_end,
         "n_save": args.n_save,
         "steps": args.steps,
         "learning_rate": args.learning_rate,
@@ -204,25 +285,32 @@ def run(args) -> int:
             "nominal": dict(smoothing.nominal),
         },
         "params": problem.fixed,
-        "ideal_lock_time": problem.lock_time,
-        "status": status,
+        "step_control": problem.step_control.to_json(),
+        "ideal_lock_time_s": problem.lock_time,
         "wall_time_s": time.perf_counter() - began,
         **result.to_json(),
         "versions": run_metadata(),
     }
-    prepare_output_dir(args.out, args.overwrite)
-    atomic_write_json(f"{args.out}/result.json", record)
-    figure = _plot(result, args.out)
-    print(
-        "optimum: "
-        + ", ".join(f"{k}={v:.4g}" for k, v in result.optimum.items())
-        + f"  J = {result.objective[result.best]:.5g}"
-    )
-    print(f"wrote {args.out}/result.json, {figure}")
-    return 0
+    prepare_output_dir(out, args.overwrite)
+    figure = _plot(result, scene, out)
+    atomic_write_json(f"{out}/result.json", record)
+    if result.optimum is None:
+        print(f"no successful iterate: {result.status}", file=sys.stderr)
+    elif not args.quiet:
+        print(
+            "best: "
+            + ", ".join(f"{k}={v:.4g}" for k, v in result.optimum.items())
+            + f"  J = {result.objective[result.best]:.5g} (iteration {result.best + 1})"
+        )
+    if result.status != "ok":
+        print(f"error: {result.status}", file=sys.stderr)
+    if not args.quiet:
+        print(f"wrote {out}/result.json, {figure} (objective history)")
+    return 0 if result.status == "ok" else 1
 
 
-def _plot(result, out):
+def _plot(result, scene, out):
+    """The objective and each design parameter against the iteration, best iterate marked."""
     import os
 
     import matplotlib
@@ -233,12 +321,18 @@ def _plot(result, out):
     from ..io import atomic_savefig
 
     names = result.names
+    iterations = range(1, len(result.x) + 1)
     fig, axes = plt.subplots(1 + len(names), 1, figsize=(6, 2.0 * (1 + len(names))), sharex=True)
-    axes[0].plot(result.objective, "o-")
-    axes[0].set_ylabel("J")
+    axes[0].plot(iterations, result.objective, "o-")
+    axes[0].set_ylabel("objective J [-]")
+    best = result.best
+    if best is not None:
+        axes[0].plot([best + 1], [result.objective[best]], "r*", ms=12, label="best")
+        axes[0].legend(fontsize=8)
     for ax, name in zip(axes[1:], names, strict=True):
-        ax.plot([x[name] for x in result.x], "o-")
-        ax.set_ylabel(name, fontsize=8)
+        ax.plot(iterations, [x[name] for x in result.x], "o-")
+        unit = scene.params[name].unit if name in scene.params else ""
+        ax.set_ylabel(f"{name} [{unit or '-'}]", fontsize=8)
     axes[-1].set_xlabel("iteration")
     fig.tight_layout()
     path = os.path.join(out, "history.png")

@@ -3,102 +3,176 @@ write its trajectory, plots and summary."""
 
 from __future__ import annotations
 
-import json
+import math
 import os
 import sys
-import time
 
-from . import SCENE_OPTION_HELP, SOLVER_HELP, parse_pairs, solver_control
+from ._args import (
+    SCENE_OPTION_HELP,
+    SET_HELP,
+    add_step_control,
+    check_used,
+    integer_at_least,
+    parse_assignments,
+    parse_pairs,
+    positive,
+    refuse,
+    step_control,
+)
 
 NAME = "simulate"
 HELP = "run a scene and write trajectory, plots, summary"
 DEFAULT_SCENE = "deploy_array"
 
+# Wall time of the integration per simulated second with each scene's default step control
+# [s/s]: `phases.integrate_s` / `t_end_s` of `jaxdeploy simulate SCENE` (default parameters)
+# on the 2-core reference machine while it was shared (load average ~9, so these are upper
+# values; docs/default_run.md has deploy_array at 0.8 s/s on a quieter core). Only the order
+# of magnitude matters: it sizes the estimate that stops a run of hours started by a
+# mistyped --t-end.
+INTEGRATE_S_PER_SIMULATED_S = {
+    "deploy_array": 5.6,  # 11.2 s for 2 s
+    "slider_crank": 21.0,  # 0.5 s for 0.024 s
+    "impact": 330.0,  # 0.2 s for 6e-4 s
+    "pendulum": 0.3,  # 0.3 s for 1 s
+}
+# A run estimated to integrate longer than this needs --long-run [s].
+LONG_RUN_S = 900.0
+
 
 def add_arguments(parser) -> None:
-    parser.add_argument("scene", nargs="?", help=f"scene name (default {DEFAULT_SCENE})")
     parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="scene parameter in SI units (repeatable); unknown names list the valid ones",
+        "scene",
+        nargs="?",
+        help=f"scene name (default {DEFAULT_SCENE}); `jaxdeploy scenes` lists them",
     )
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
     parser.add_argument(
         "--scene-option", action="append", default=[], metavar="KEY=VALUE", help=SCENE_OPTION_HELP
     )
-    parser.add_argument("--t-end", type=float, default=None, help="end time [s]")
-    parser.add_argument("--out", default=None, help="output folder (default results/SCENE)")
-    parser.add_argument("--n-save", type=int, default=2001, help="number of saved states")
+    parser.add_argument(
+        "--t-end", type=positive("--t-end", "s"), default=None, help="end time [s], > 0"
+    )
+    parser.add_argument(
+        "--out",
+        default=None,
+        help="output folder (default results/simulate/SCENE-DATE-TIME, a new one every run)",
+    )
+    parser.add_argument(
+        "--n-save",
+        type=integer_at_least("--n-save", 2),
+        default=2001,
+        help="number of saved states, ≥ 2",
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing result")
-    parser.add_argument("--solver", default=None, metavar="NAME", help=SOLVER_HELP)
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--long-run",
+        action="store_true",
+        help=f"accept a run estimated to integrate longer than {LONG_RUN_S / 60:.0f} min",
+    )
+    parser.add_argument(
+        "--quiet", action="store_true", help="print nothing but errors (no phases, no progress)"
+    )
+    add_step_control(parser)
 
 
-def parse_assignments(items: list[str]) -> dict[str, float]:
-    out = {}
-    for item in items:
-        if "=" not in item:
-            raise SystemExit(f"error: --set expects NAME=VALUE, got {item!r}")
-        name, value = item.split("=", 1)
-        try:
-            out[name.strip()] = float(value)
-        except ValueError:
-            raise SystemExit(f"error: --set {name}: {value!r} is not a number (SI units)") from None
-    return out
+def run_length_problem(scene, control, t_end: float, long_run: bool) -> str | None:
+    """Why a run of `scene` to `t_end` should not start, or None: it needs more steps than
+    `control.max_steps` allows (at least t_end/dt_max adaptive or t_end/dt fixed, so it
+    would fail), or its estimated integration time exceeds `LONG_RUN_S` without `long_run`."""
+    if control.adaptive:
+        bound = control.dt_max
+        what = f"t_end/dt_max = {t_end:g}/{bound:g}" if bound is not None else None
+    else:
+        bound = control.dt
+        what = f"t_end/dt = {t_end:g}/{bound:g}"
+    if bound is not None and is_number(bound):
+        steps = t_end / float(bound)
+        if steps > control.max_steps:
+            return (
+                f"--t-end = {t_end:g} s cannot finish: it needs at least {what} = {steps:.3g} "
+                f"steps, more than the {control.max_steps} a run may take; shorten --t-end or "
+                "lengthen --dt-max/--dt"
+            )
+    rate = INTEGRATE_S_PER_SIMULATED_S.get(scene.name)
+    if rate is not None and not long_run:
+        estimate = rate * t_end
+        if estimate > LONG_RUN_S:
+            return (
+                f"--t-end = {t_end:g} s would integrate for about {_duration(estimate)} "
+                f"(~{rate:g} s per simulated second with {scene.name}'s default step control "
+                "on one core); pass --long-run to start it anyway"
+            )
+    return None
 
 
-def _refuse(message: str) -> int:
-    print(f"error: {message}", file=sys.stderr)
-    return 2
+def is_number(value) -> bool:
+    return isinstance(value, int | float) and math.isfinite(value)
+
+
+def _duration(seconds: float) -> str:
+    for unit, size in (("days", 86400.0), ("hours", 3600.0), ("minutes", 60.0)):
+        if seconds >= size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds:.3g} s"
 
 
 def run(args) -> int:
-    import math
-
-    from ..io import (
-        atomic_write_json,
-        atomic_write_npz,
-        check_output_dir,
-        prepare_output_dir,
-        run_metadata,
-    )
+    from ..io import check_output_dir, default_output_dir
     from ..mechanism import AssemblyError
     from ..scenes import SCENES, get_scene
-    from ..simulation import simulate
 
     # Every refusal happens here, before the output folder is created and before the solver
     # is compiled: a bad run leaves nothing behind.
     scene_name = args.scene or DEFAULT_SCENE
     if scene_name not in SCENES:
-        return _refuse(f"unknown scene {scene_name!r}; valid: {', '.join(sorted(SCENES))}")
+        return refuse(f"unknown scene {scene_name!r}; valid: {', '.join(sorted(SCENES))}")
     try:
         scene = get_scene(scene_name, **parse_pairs(args.scene_option, "--scene-option"))
     except ValueError as err:
-        return _refuse(f"--scene-option: {err}")
+        return refuse(f"--scene-option: {err}")
     try:
-        params = scene.resolve_params(parse_assignments(args.set))
+        assignments = parse_assignments(args.set)
+        params = scene.resolve_params(assignments)
+        check_used(scene, assignments, "--set")
+        control = step_control(args, scene)
     except ValueError as err:
-        return _refuse(str(err))
+        return refuse(str(err))
     t_end = scene.default_t_end if args.t_end is None else args.t_end
-    if not (math.isfinite(t_end) and t_end > 0):
-        return _refuse(f"--t-end = {t_end} is invalid: it must be finite and in (0, inf) s")
-    if args.n_save < 2:
-        return _refuse(f"--n-save = {args.n_save} is invalid: it must be an integer >= 2")
-    try:
-        control = solver_control(scene, args.solver)
-    except ValueError as err:
-        return _refuse(str(err))
-    out = args.out or f"results/{scene_name}"
+    problem = run_length_problem(scene, control, t_end, args.long_run)
+    if problem is not None:
+        return refuse(problem)
+    out = args.out or default_output_dir("simulate", scene_name)
     try:
         check_output_dir(out, args.overwrite)
     except FileExistsError as err:
-        return _refuse(str(err))
+        return refuse(str(err))
+
+    from ._phases import Phases
+
+    phases = Phases(quiet=args.quiet)
     try:
-        mechanism = scene.build(params)
-        initial = scene.initial_state(params, mechanism)
+        with phases.phase(
+            "build", f"{scene_name}: build the mechanism, assemble the initial state"
+        ):
+            mechanism = scene.build(params)
+            initial = scene.initial_state(params, mechanism)
     except (ValueError, AssemblyError) as err:
-        return _refuse(f"scene {scene_name!r} with these parameters: {err}")
+        return refuse(f"scene {scene_name!r} with these parameters: {err}")
+    return _simulate(args, scene, params, control, t_end, mechanism, initial, out, phases)
+
+
+def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phases) -> int:
+    from ..io import (
+        atomic_write_json,
+        atomic_write_npz,
+        prepare_output_dir,
+        run_metadata,
+        strict_json,
+    )
+    from ..simulation import simulate
+    from ._results import units_of
+
     prepare_output_dir(out, args.overwrite)
     # summary.json is written last and marks a complete result; drop the old one first so a
     # rerun that dies half-way cannot pass for a complete result.
@@ -106,21 +180,22 @@ def run(args) -> int:
     if os.path.exists(stale_marker):
         os.unlink(stale_marker)
 
-    start = time.perf_counter()
-    trajectory = simulate(
-        mechanism,
-        initial,
-        t_end,
-        n_save=args.n_save,
-        progress=not args.quiet and sys.stderr.isatty(),
-        **control,
-    )
-    trajectory.q.block_until_ready()
-    wall = time.perf_counter() - start
+    label = f"integrate to t_end = {t_end:g} s ({control.solver_name()})"
+    with phases.phase("integrate", label, split_compile=True):
+        trajectory = simulate(
+            mechanism,
+            initial,
+            t_end,
+            n_save=args.n_save,
+            # diffrax's bar shows the simulated time as a percentage of t_end.
+            progress=not args.quiet and sys.stderr.isatty(),
+            control=control,
+        )
+        trajectory.q.block_until_ready()
 
     summary = {
-        "scene": scene_name,
-        "t_end": t_end,
+        "scene": scene.name,
+        "t_end_s": t_end,
         "status": trajectory.status(),
         "n_steps": int(trajectory.stats["num_accepted_steps"]),
         "n_rejected": int(trajectory.stats["num_rejected_steps"]),
@@ -130,31 +205,39 @@ def run(args) -> int:
             if "num_newton_iterations" in trajectory.stats
             else None
         ),
-        "wall_time_s": wall,
-        "wall_time_includes": "compilation and run",
     }
-    summary.update(scene.summary(params, mechanism, trajectory))
+    with phases.phase("outputs", "outputs: summary quantities, trajectory.npz"):
+        summary.update(scene.summary(params, mechanism, trajectory))
+        atomic_write_npz(
+            f"{out}/trajectory.npz",
+            t=trajectory.ts,
+            q=trajectory.q,
+            v=trajectory.v,
+            qdd=trajectory.qdd,
+            lam=trajectory.lam,
+        )
+    with phases.phase("plots"):
+        figures = scene.plot(params, mechanism, trajectory, out)
+    summary["phases"] = dict(phases.durations)
+    summary["wall_time_s"] = phases.total()
+    summary["units"] = units_of(summary)
     summary["params"] = params
     summary["scene_options"] = scene.options
     # simulate draws no random numbers: the run is reproducible from params and versions.
     summary["seed"] = None
-    summary["step_control"] = control
+    summary["step_control"] = control.to_json()
     summary["versions"] = run_metadata()
-    atomic_write_npz(
-        f"{out}/trajectory.npz",
-        t=trajectory.ts,
-        q=trajectory.q,
-        v=trajectory.v,
-        qdd=trajectory.qdd,
-        lam=trajectory.lam,
-    )
-    figures = scene.plot(params, mechanism, trajectory, out)
     atomic_write_json(f"{out}/summary.json", summary)
-    shown = {
-        k: v
-        for k, v in summary.items()
-        if k not in ("params", "scene_options", "versions", "step_control")
-    }
-    print(json.dumps(shown, indent=2, default=float))
-    print(f"wrote {out}/summary.json, {out}/trajectory.npz" + "".join(f", {f}" for f in figures))
+    if not args.quiet:
+        shown = {
+            k: v
+            for k, v in summary.items()
+            if k not in ("params", "scene_options", "versions", "step_control")
+        }
+        print(strict_json(shown, indent=2))
+        print(
+            f"wrote {out}/summary.json, {out}/trajectory.npz" + "".join(f", {f}" for f in figures)
+        )
+    if not trajectory.ok:
+        print(f"error: the run {trajectory.status()}", file=sys.stderr)
     return 0 if trajectory.ok else 1

@@ -6,7 +6,18 @@ from __future__ import annotations
 
 import sys
 
-from . import SOLVER_HELP, solver_control
+from ._args import (
+    SCENE_OPTION_HELP,
+    SET_HELP,
+    add_step_control,
+    check_used,
+    integer_at_least,
+    parse_assignments,
+    parse_pairs,
+    positive,
+    refuse,
+    step_control,
+)
 
 NAME = "sweep"
 HELP = "parameter sweep: vmapped, sharded, chunked, resumable"
@@ -19,18 +30,33 @@ def add_arguments(parser) -> None:
         action="append",
         default=[],
         metavar="NAME=VALUES",
-        help="values: v1,v2,... or LOW:HIGH:N (linear) or LOW:HIGH:N:log (geometric), SI units",
+        help="a swept parameter (repeatable, each NAME once): v1,v2,... or LOW:HIGH:N (linear) "
+        "or LOW:HIGH:N:log (geometric), SI units",
     )
-    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
-    parser.add_argument("--out", required=True, help="output folder")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
+    parser.add_argument(
+        "--scene-option", action="append", default=[], metavar="KEY=VALUE", help=SCENE_OPTION_HELP
+    )
+    parser.add_argument(
+        "--out",
+        default=None,
+        help="output folder (default results/sweep/SCENE-DATE-TIME; --resume needs it)",
+    )
     parser.add_argument("--resume", action="store_true", help="continue the sweep in --out")
-    parser.add_argument("--t-end", type=float, default=None, help="end time [s]")
-    parser.add_argument("--n-save", type=int, default=201, help="saved states per case")
+    parser.add_argument(
+        "--t-end", type=positive("--t-end", "s"), default=None, help="end time [s], > 0"
+    )
+    parser.add_argument(
+        "--n-save",
+        type=integer_at_least("--n-save", 2),
+        default=201,
+        help="saved states per case, ≥ 2",
+    )
     parser.add_argument(
         "--chunk-size",
-        type=int,
+        type=integer_at_least("--chunk-size", 1),
         default=None,
-        help="cases per compiled run (memory, resume granularity); default "
+        help="cases per compiled run (memory, resume granularity), ≥ 1; default "
         "jaxdeploy.sweep.DEFAULT_CHUNK_SIZE",
     )
     parser.add_argument(
@@ -49,46 +75,72 @@ def add_arguments(parser) -> None:
         help="design objective terms or a preset, stored per case (deploy_array)",
     )
     parser.add_argument("--no-trajectories", action="store_true", help="store no q, v")
-    parser.add_argument("--solver", default=None, metavar="NAME", help=SOLVER_HELP)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument(
         "--distributed", action="store_true", help="call jax.distributed.initialize() first"
     )
+    add_step_control(parser)
+
+
+GRID_FORMS = "v1,v2,... or LOW:HIGH:N or LOW:HIGH:N:log"
 
 
 def parse_values(name: str, text: str) -> list[float]:
-    """`v1,v2,...`, `LOW:HIGH:N` or `LOW:HIGH:N:log`."""
+    """`v1,v2,...`, `LOW:HIGH:N` or `LOW:HIGH:N:log` as a list of finite numbers; anything
+    else raises `ValueError` naming `--grid NAME` and the valid forms."""
+    import math
+
     import numpy as np
 
-    try:
-        if ":" in text:
-            parts = text.split(":")
-            if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3] != "log"):
-                raise ValueError
+    def bad(reason):
+        return ValueError(f"--grid {name}={text!r}: {reason}; expected {GRID_FORMS}")
+
+    if ":" in text:
+        parts = text.split(":")
+        if len(parts) not in (3, 4) or (len(parts) == 4 and parts[3] != "log"):
+            raise bad("malformed range")
+        try:
             low, high, n = float(parts[0]), float(parts[1]), int(parts[2])
-            if n < 1:
-                raise ValueError
-            if len(parts) == 4:
-                if not (low > 0 and high > 0):
-                    raise SystemExit(f"error: --grid {name}: a log grid needs LOW, HIGH > 0")
-                return np.geomspace(low, high, n).tolist()
-            return np.linspace(low, high, n).tolist()
-        return [float(v) for v in text.split(",") if v.strip()]
+        except ValueError:
+            raise bad("LOW and HIGH must be numbers, N an integer") from None
+        if not (math.isfinite(low) and math.isfinite(high)):
+            raise bad("LOW and HIGH must be finite")
+        if n < 1:
+            raise bad(f"N = {n} must be ≥ 1")
+        if len(parts) == 4:
+            if not (low > 0 and high > 0):
+                raise bad("a log grid needs LOW, HIGH > 0")
+            return np.geomspace(low, high, n).tolist()
+        return np.linspace(low, high, n).tolist()
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
-        raise SystemExit(
-            f"error: --grid {name}={text!r}: expected v1,v2,... or LOW:HIGH:N[:log]"
-        ) from None
+        raise bad("a value is not a number") from None
+    if not values:
+        raise bad("no values")
+    if not all(math.isfinite(v) for v in values):
+        raise bad("values must be finite")
+    return values
 
 
-def parse_grid(items: list[str]) -> dict[str, list[float]]:
+def parse_grid(items: list[str], fixed=()) -> dict[str, list[float]]:
+    """`--grid` items as `{name: values}`; a malformed item, a NAME given twice or also fixed
+    by `--set` (names in `fixed`) raises `ValueError`."""
     grid = {}
     for item in items:
-        if "=" not in item:
-            raise SystemExit(f"error: --grid expects NAME=VALUES, got {item!r}")
-        name, text = item.split("=", 1)
-        grid[name.strip()] = parse_values(name.strip(), text)
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise ValueError(f"--grid expects NAME=VALUES, got {item!r}")
+        if name in grid:
+            raise ValueError(
+                f"--grid {name} is given twice; give all its values in one --grid {name}=v1,v2,..."
+            )
+        if name in fixed:
+            raise ValueError(f"{name} is both swept (--grid) and fixed (--set); give one")
+        grid[name] = parse_values(name, text)
     if not grid:
-        raise SystemExit("error: give at least one --grid NAME=VALUES")
+        raise ValueError("give at least one --grid NAME=VALUES")
     return grid
 
 
@@ -98,28 +150,43 @@ def run(args) -> int:
     if args.distributed:
         jax.distributed.initialize()
 
+    from ..io import default_output_dir
     from ..scenes import SCENES, get_scene
-    from ..sweep import DEFAULT_CHUNK_SIZE, DEFAULT_POLICY, sweep
-    from .simulate import parse_assignments
+    from ..sweep import DEFAULT_CHUNK_SIZE, DEFAULT_POLICY, grid_cases, parse_policy, sweep
 
+    # Every refusal happens before anything is written or compiled (the ideal reference of an
+    # --objective is a simulation: it comes after the checks).
     if args.scene not in SCENES:
-        print(
-            f"error: unknown scene {args.scene!r}; valid: {', '.join(sorted(SCENES))}",
-            file=sys.stderr,
-        )
-        return 2
-    scene = get_scene(args.scene)
-    grid = parse_grid(args.grid)
-    fixed = parse_assignments(args.set)
-    t_end = scene.default_t_end if args.t_end is None else args.t_end
-    evaluate, features = None, None
+        return refuse(f"unknown scene {args.scene!r}; valid: {', '.join(sorted(SCENES))}")
+    if args.resume and args.out is None:
+        return refuse("--resume continues the sweep in --out: give --out")
     try:
-        control = solver_control(scene, args.solver)
+        scene = get_scene(args.scene, **parse_pairs(args.scene_option, "--scene-option"))
+        fixed = parse_assignments(args.set)
+        grid = parse_grid(args.grid, fixed)
+        cases = grid_cases(grid)
+        rows = zip(*cases.values(), strict=True)
+        for row in rows:  # names and ranges of every case (cheap: no simulation)
+            scene.resolve_params({**fixed, **dict(zip(cases, row, strict=True))})
+        check_used(scene, fixed, "--set")
+        check_used(scene, grid, "--grid")
+        control = step_control(args, scene)
+        policy = DEFAULT_POLICY if args.policy is None else args.policy
+        parse_policy(policy)
+        objective = None
         if args.objective:
             from ..objectives import parse_objective
-            from ..optimize import DesignProblem
 
             objective = parse_objective(args.objective)
+    except ValueError as err:
+        return refuse(str(err))
+    t_end = scene.default_t_end if args.t_end is None else args.t_end
+    out = args.out or default_output_dir("sweep", scene.name)
+    evaluate, features = None, None
+    try:
+        if objective is not None:
+            from ..optimize import DesignProblem
+
             problem = DesignProblem(
                 scene, objective, t_end, n_save=args.n_save, fixed=fixed, control=control
             )
@@ -132,13 +199,13 @@ def run(args) -> int:
         manifest = sweep(
             scene,
             grid,
-            args.out,
+            out,
             t_end=t_end,
             n_save=args.n_save,
             fixed=fixed,
             control=control,
             chunk_size=DEFAULT_CHUNK_SIZE if args.chunk_size is None else args.chunk_size,
-            policy=DEFAULT_POLICY if args.policy is None else args.policy,
+            policy=policy,
             resume=args.resume,
             evaluate=evaluate,
             features=features,
@@ -146,12 +213,15 @@ def run(args) -> int:
             progress=not args.quiet,
         )
     except (ValueError, FileExistsError) as err:
+        return refuse(str(err))
+    except RuntimeError as err:  # the objective's ideal reference run failed
         print(f"error: {err}", file=sys.stderr)
-        return 2
+        return 1
     failed = sum(c["failed"] for c in manifest["chunks"])
     done = sum(c["stop"] - c["start"] for c in manifest["chunks"])
-    print(
-        f"sweep: {done}/{manifest['n_cases']} cases in {len(manifest['chunks'])} chunks, "
-        f"{failed} failed; wrote {args.out}/manifest.json"
-    )
+    if not args.quiet:
+        print(
+            f"sweep: {done}/{manifest['n_cases']} cases in {len(manifest['chunks'])} chunks, "
+            f"{failed} failed; wrote {out}/manifest.json"
+        )
     return 0 if failed == 0 and done == manifest["n_cases"] else 1

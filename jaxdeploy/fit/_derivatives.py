@@ -88,8 +88,9 @@ def parameter_jacobian(
     return jax.jit(transform(f))(x0)
 
 
-def _adaptive(control: Mapping) -> bool:
-    return control.get("rtol") is not None or control.get("atol") is not None
+def _adaptive(control) -> bool:
+    """Whether a run with this `StepControl` chooses its own steps."""
+    return control.adaptive
 
 
 def central_differences(

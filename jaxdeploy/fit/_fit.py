@@ -513,7 +513,7 @@ def fit(
     *,
     fixed: Mapping | None = None,
     residuals: ResidualSpec | Sequence[ResidualSpec] | None = None,
-    control: Mapping | None = None,
+    control=None,
     max_iterations: int = 30,
     ftol: float = 1e-8,
     ctol: float | None = None,
@@ -531,8 +531,8 @@ def fit(
     - `residuals`: a `ResidualSpec` (default: every sample, pointwise) or a sequence of them,
       fitted in turn (continuation: e.g. a short window or coarse block means first, each
       stage starting from the previous estimate). Uncertainties come from the last stage.
-    - `control`: step control for the model runs (see `run_scene`); `simulate_options` go to
-      `simulate` (e.g. `solver`).
+    - `control`: the model runs' `StepControl` (or a mapping of its fields overriding the
+      scene's default, `batch.step_control`); `simulate_options` go to `simulate`.
     - `starts`, `seed`: global first stage (module docstring): `starts` Latin-hypercube
       points plus the guess, evaluated as one batch on the first residual stage; LM starts
       from the best. 0 (default) starts from the guess.
@@ -661,25 +661,26 @@ def fit(
     )
 
 
-def tolerance_check(result: FitResult, scene, fixed: Mapping, control: Mapping) -> dict:
+def tolerance_check(result: FitResult, scene, fixed: Mapping, control) -> dict:
     """Rerun the model at the estimate with rtol and atol 10x tighter than the fit's `control`
     and report (a) the RMS change of the channels in noise levels and (b) the change of the
     estimates a refit at the tighter tolerance would make, from one Gauss–Newton step with
     the optimum's Jacobian (Δθ = −J⁺ r_tight: the refit's first iterate, accurate when the
     change is small), in standard errors. Stored in `result.tolerance` and returned."""
+    from ..batch import step_control
     from ._schedule import _scaled, model_difference, run_channels
 
     cmp_ = result.comparison
-    control = {**scene.default_control, **control}
+    control = step_control(scene, control)
     params = {**scene.resolve_params(fixed), **result.estimates}
-    record = {"rtol": control.get("rtol"), "atol": control.get("atol")}
-    if control.get("dt") is not None or control.get("rtol") is None:
+    record = {"rtol": control.rtol, "atol": control.atol}
+    if control.rtol is None:
         record["note"] = "fixed step: no tolerance to tighten"
         result.tolerance = record
         return record
     tight = _scaled(control, 0.1)
     y_tight, _ = run_channels(scene, params, cmp_.ts, cmp_.names, tight)
-    record.update(rtol_check=tight["rtol"], atol_check=tight.get("atol"))
+    record.update(rtol_check=tight.rtol, atol_check=tight.atol)
     if y_tight is None:
         record["note"] = "the run at the tighter tolerance failed"
         result.tolerance = record

@@ -44,11 +44,11 @@ def plot_fit(result, out_dir: str) -> list[str]:
         ax.plot(cmp_.times, data, ".", ms=2.5, color="0.4", label="data")
         ax.plot(first.times, initial, "-", lw=1, color="tab:orange", label=start_label)
         ax.plot(cmp_.times, final, "-", lw=1.2, color="tab:blue", label="fitted")
-        ax.set_ylabel(name)
+        ax.set_ylabel(f"{name} [{channel_unit(name)}]")
         ax.legend(loc="best", fontsize=8)
         axr.plot(cmp_.times, (final - data) / cmp_.scale[name], ".", ms=2.5, color="tab:blue")
         axr.axhline(0.0, color="k", lw=0.6)
-        axr.set_ylabel("residual / σ")
+        axr.set_ylabel("residual / σ [-]")
         axr.set_xlabel("t [s]")
         fig.tight_layout()
         files.append(save(fig, f"fit_{name}.png"))
@@ -67,7 +67,7 @@ def plot_fit(result, out_dir: str) -> list[str]:
             label="rejected trial",
         )
     ax.set_xlabel("evaluation")
-    ax.set_ylabel("½ Σ r² (noise units)")
+    ax.set_ylabel("½ Σ r² [noise units²]")
     ax.legend(fontsize=8)
     fig.tight_layout()
     files.append(save(fig, "loss_history.png"))
@@ -116,3 +116,25 @@ def plot_residuals(result, out_dir, plt, save) -> list[str]:
     fig.tight_layout()
     files.append(save(fig, "residual_autocorrelation.png"))
     return files
+
+
+# Units of the scenes' channel names by their suffix (`Scene.channels`: `{body}_x`, `_y` in m,
+# `_theta` in rad, `_ax`, `_ay` in m/s², `_atheta` in rad/s²; deploy_array's `alpha` in rad).
+_CHANNEL_UNITS = (
+    ("_atheta", "rad/s²"),
+    ("_ax", "m/s²"),
+    ("_ay", "m/s²"),
+    ("_theta", "rad"),
+    ("_x", "m"),
+    ("_y", "m"),
+)
+
+
+def channel_unit(name: str) -> str:
+    """The unit of channel `name`, from its suffix ("?" when the name does not say)."""
+    if name == "alpha":
+        return "rad"
+    for suffix, unit in _CHANNEL_UNITS:
+        if name.endswith(suffix):
+            return unit
+    return "?"

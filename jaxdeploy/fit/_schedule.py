@@ -48,12 +48,10 @@ def run_channels(scene, params, ts, names, control):
     return {n: np.asarray(v) for n, v in channels.items()}, traj
 
 
-def _scaled(control: Mapping, factor: float) -> dict:
-    out = dict(control)
-    out["rtol"] = control["rtol"] * factor
-    if control.get("atol") is not None:
-        out["atol"] = control["atol"] * factor
-    return out
+def _scaled(control, factor: float):
+    """`control` (a `StepControl`) with rtol and atol multiplied by `factor`."""
+    atol = None if control.atol is None else control.atol * factor
+    return control.replace(rtol=control.rtol * factor, atol=atol)
 
 
 def model_difference(a: Mapping, b: Mapping, comparison) -> float:
@@ -65,21 +63,23 @@ def model_difference(a: Mapping, b: Mapping, comparison) -> float:
     )
 
 
-def choose_tolerance(scene, params: Mapping, comparison, control: Mapping | None = None):
+def choose_tolerance(scene, params: Mapping, comparison, control=None):
     """`(control, record)`: the step control whose model error at `params` is at most
     `MODEL_ERROR` noise levels RMS (module docstring), and what was measured. `record` also
     holds the start run's trajectory (`"trajectory"`, not JSON) for `impact_horizons`."""
-    base = {**scene.default_control, **(control or {})}
+    from ..batch import step_control
+
+    base = step_control(scene, control)
     ts, names = comparison.ts, comparison.names
-    if base.get("rtol") is None or base.get("dt") is not None:  # fixed steps: nothing to choose
+    if base.rtol is None:  # fixed steps (or atol alone): no relative tolerance to choose
         y, traj = run_channels(scene, params, ts, names, base)
-        return dict(control or {}), {"chosen_rtol": None, "met": None, "steps": [],
-                                     "note": "fixed step", "trajectory": traj}  # fmt: skip
+        return base, {"chosen_rtol": None, "met": None, "steps": [],
+                      "note": "fixed step", "trajectory": traj}  # fmt: skip
     scale = max(float(np.sqrt(np.mean(comparison.data_features[n] ** 2))) for n in comparison.names)
     noise = min(comparison.sigma.values())
-    rtol0 = min(base["rtol"], 1e-2 * noise / scale) if scale > 0 else base["rtol"]
+    rtol0 = min(base.rtol, 1e-2 * noise / scale) if scale > 0 else base.rtol
     rtol0 = max(10.0 ** math.floor(math.log10(rtol0)), RTOL_FLOOR)
-    current = _scaled(base, rtol0 / base["rtol"])
+    current = _scaled(base, rtol0 / base.rtol)
     y, traj = run_channels(scene, params, ts, names, current)
     if y is None:
         raise RuntimeError(
@@ -88,20 +88,20 @@ def choose_tolerance(scene, params: Mapping, comparison, control: Mapping | None
         )
     steps = []
     for _ in range(MAX_DECADES):
-        if current["rtol"] / 10.0 < RTOL_FLOOR * (1 - 1e-9):
+        if current.rtol / 10.0 < RTOL_FLOOR * (1 - 1e-9):
             break
         tighter = _scaled(current, 0.1)
         y_tight, traj_tight = run_channels(scene, params, ts, names, tighter)
         if y_tight is None:
             break
         diff = model_difference(y, y_tight, comparison)
-        steps.append({"rtol": current["rtol"], "rtol_check": tighter["rtol"],
+        steps.append({"rtol": current.rtol, "rtol_check": tighter.rtol,
                       "rms_difference_over_sigma": diff})  # fmt: skip
         if diff <= MODEL_ERROR:
-            return current, {"chosen_rtol": current["rtol"], "met": True, "steps": steps,
+            return current, {"chosen_rtol": current.rtol, "met": True, "steps": steps,
                              "trajectory": traj}  # fmt: skip
         current, y, traj = tighter, y_tight, traj_tight
-    return current, {"chosen_rtol": current["rtol"], "met": False, "steps": steps,
+    return current, {"chosen_rtol": current.rtol, "met": False, "steps": steps,
                      "trajectory": traj}  # fmt: skip
 
 

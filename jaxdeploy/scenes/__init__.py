@@ -34,7 +34,9 @@ def get_scene(name: str, **options) -> Scene:
 def scene_options(name: str) -> list[str]:
     """The option names (constructor keywords) scene `name` accepts."""
     signature = inspect.signature(SCENES[name].__init__)
-    return [p for p in signature.parameters if p != "self"]
+    kinds = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    # A scene without its own __init__ has object's (*args, **kwargs): no options.
+    return [k for k, p in signature.parameters.items() if k != "self" and p.kind in kinds]
 
 
 __all__ = [

@@ -5,7 +5,7 @@ from __future__ import annotations
 from .. import contact
 from ..contact.damping import DEFAULT_IMPACT_VELOCITY_FLOOR
 from ..mechanism.clearance import IMPACT_VELOCITY_RULES
-from .base import ParamSpec, is_exactly_zero
+from .base import OptionSpec, ParamSpec, is_exactly_zero
 
 NORMAL_LAWS = {
     "hunt_crossley": contact.HuntCrossley,
@@ -33,6 +33,22 @@ SLIP_VELOCITY_SPEC = ParamSpec(
 )
 
 
+# The options of scenes with clearance joints (their constructors' keywords).
+NORMAL_LAW_OPTION = OptionSpec(
+    "lankarani_nikravesh",
+    tuple(sorted(NORMAL_LAWS)),
+    "restitution-calibrated damping law of the clearance joints (docs/contact.md)",
+)
+IMPACT_VELOCITY_RULE_OPTION = OptionSpec(
+    "onset",
+    tuple(IMPACT_VELOCITY_RULES),
+    "the damping law's impact velocity v⁻: onset (classical: at the located contact onset, "
+    "held to separation) or running_max (largest approach speed of the contact)",
+)
+FRICTION_SHAPE_OPTION = OptionSpec(
+    "algebraic", FRICTION_SHAPES, "the regularised Coulomb law's sign function"
+)
+IDEAL_OPTION = OptionSpec(False, (False, True), "true: every joint ideal (the reference)")
 # Contact-law parameters of a clearance joint (irrelevant when the joint is made ideal).
 CONTACT_PARAMS = (
     "youngs_modulus",

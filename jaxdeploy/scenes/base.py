@@ -17,6 +17,7 @@ from typing import ClassVar
 
 from .._validation import check_range, is_concrete
 from ..mechanism import ConsistentState, Mechanism
+from ..solvers.step_control import StepControl
 
 
 @dataclass(frozen=True)
@@ -32,6 +33,16 @@ class ParamSpec:
     high_inclusive: bool = True
 
 
+@dataclass(frozen=True)
+class OptionSpec:
+    """A scene option (a constructor keyword, fixed at trace time): default, the valid
+    choices (empty: any value of the default's type) and meaning."""
+
+    default: object
+    choices: tuple = ()
+    doc: str = ""
+
+
 def is_exactly_zero(value) -> bool:
     """True only for a concrete zero: composition decisions never depend on traced values."""
     return is_concrete(value) and float(value) == 0.0
@@ -43,12 +54,16 @@ class Scene(abc.ABC):
     name: ClassVar[str]
     params: ClassVar[dict[str, ParamSpec]]
     default_t_end: ClassVar[float]
-    default_control: ClassVar[dict]
+    # The solver and step control of a run unless the caller gives its own.
+    default_control: ClassVar[StepControl]
 
     @property
     def options(self) -> dict:
         """The scene's options (its constructor's keyword arguments), as recorded in results."""
         return {}
+
+    # The scene's options (constructor keywords): `jaxdeploy scenes SCENE` lists them.
+    option_specs: ClassVar[dict[str, OptionSpec]] = {}
 
     def default_params(self) -> dict[str, float]:
         return {k: spec.default for k, spec in self.params.items()}

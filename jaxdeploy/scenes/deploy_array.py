@@ -35,13 +35,19 @@ from ..mechanism import (
     RevoluteClearance,
     consistent_state,
 )
+from ..solvers.step_control import StepControl
 from ._contact import (
+    CONTACT_PARAMS,
+    FRICTION_SHAPE_OPTION,
+    IDEAL_OPTION,
     IMPACT_VELOCITY_FLOOR_SPEC,
+    IMPACT_VELOCITY_RULE_OPTION,
+    NORMAL_LAW_OPTION,
     SLIP_VELOCITY_SPEC,
     check_contact_options,
     clearance_contact_laws,
 )
-from .base import ParamSpec, Scene
+from .base import OptionSpec, ParamSpec, Scene
 
 # The classical (literature) rule: docs/deploy_array.md ("Impact-velocity rule") measures both
 # rules on this scene; onset does not fail there (no contact begins at rest, same lock time and
@@ -156,7 +162,25 @@ class DeployArray(Scene):
     # contact forces, several times cheaper, more accurate at the same tolerance — for
     # clearances from ~5 µm up; below, the stiff contact of a journal held in a tiny gap
     # limits an explicit step, and generalized-α (`solver="generalized_alpha"`) is faster.
-    default_control = {"rtol": 1e-6, "atol": 1e-9, "dt_max": 5e-4, "solver": "tsit5"}
+    default_control = StepControl("tsit5", rtol=1e-6, atol=1e-9, dt_max=5e-4)
+    option_specs = {
+        "clearance_joints": OptionSpec(
+            DEFAULT_CLEARANCE_JOINTS,
+            (),
+            "{joint: panel} of the joints with clearance (JSON), the others ideal; a panel's "
+            "_ra and _clearance parameters exist for its joint",
+        ),
+        "ideal": IDEAL_OPTION,
+        "normal_law": NORMAL_LAW_OPTION,
+        "impact_velocity_rule": IMPACT_VELOCITY_RULE_OPTION,
+        "friction_shape": FRICTION_SHAPE_OPTION,
+        "latch": OptionSpec(
+            DEFAULT_LATCH,
+            LATCH_MODELS,
+            "root latch model: preloaded (holds the angle and presses the root hinge to one "
+            "side) or angle_only",
+        ),
+    }
 
     def __init__(
         self,
@@ -204,9 +228,13 @@ class DeployArray(Scene):
         }
 
     def ignored_params(self) -> dict[str, str]:
+        out = {}
         if self.latch == "angle_only":
-            return dict.fromkeys(LATCH_PRELOAD_PARAMS, "latch=preloaded")
-        return {}
+            out.update(dict.fromkeys(LATCH_PRELOAD_PARAMS, "latch=preloaded"))
+        if self.ideal:
+            used_by_contact = (*CONTACT_PARAMS, "pin_radius", "roughness_offset")
+            out.update({n: "ideal=false" for n in self.params if n in used_by_contact})
+        return out
 
     def build(self, params):
         p = params

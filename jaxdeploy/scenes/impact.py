@@ -18,8 +18,14 @@ import jax.numpy as jnp
 from .. import contact
 from ..mechanism import Body, Mechanism, RevoluteClearance, consistent_state
 from ..mechanism.clearance import IMPACT_VELOCITY_RULES
-from ._contact import IMPACT_VELOCITY_FLOOR_SPEC, NORMAL_LAWS, check_choice
-from .base import ParamSpec, Scene, is_exactly_zero
+from ..solvers.step_control import StepControl
+from ._contact import (
+    IMPACT_VELOCITY_FLOOR_SPEC,
+    IMPACT_VELOCITY_RULE_OPTION,
+    NORMAL_LAWS,
+    check_choice,
+)
+from .base import OptionSpec, ParamSpec, Scene, is_exactly_zero
 
 INF = math.inf
 
@@ -41,7 +47,16 @@ class Impact(Scene):
         "impact_velocity_floor": IMPACT_VELOCITY_FLOOR_SPEC,
     }
     default_t_end = 6e-4  # first touch at c/v0 = 1e-4 s; Hertz contact lasts ~3.2e-4 s
-    default_control = {"rtol": 1e-8, "atol": 1e-13, "dt_max": 1e-6}
+    default_control = StepControl(rtol=1e-8, atol=1e-13, dt_max=1e-6)
+    option_specs = {
+        "damping": OptionSpec(
+            "none",
+            ("none", "hunt_crossley_material", *sorted(NORMAL_LAWS)),
+            "none (undamped Hertz or rough law), hunt_crossley_material (F = Kδ^1.5(1 + αδ̇), "
+            "α = material_damping) or a restitution law (restitution, impact_velocity_floor)",
+        ),
+        "impact_velocity_rule": IMPACT_VELOCITY_RULE_OPTION,
+    }
 
     def __init__(self, damping: str = "none", impact_velocity_rule: str = "onset"):
         check_choice("damping", damping, sorted({"none", "hunt_crossley_material", *NORMAL_LAWS}))

@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 
 from ..mechanism import Body, Gravity, Mechanism, Revolute, consistent_state
+from ..solvers.step_control import StepControl
 from .base import ParamSpec, Scene
 
 
@@ -22,7 +23,7 @@ class Pendulum(Scene):
         "gravity": ParamSpec(9.81, 0.0, 1e3, "m/s^2", "gravitational acceleration (−y)"),
     }
     default_t_end = 1.0
-    default_control = {"dt": 1e-3}
+    default_control = StepControl(dt=1e-3)
 
     def build(self, params):
         length, mass = params["length"], params["mass"]

@@ -32,11 +32,16 @@ from ..mechanism import (
     RevoluteClearance,
     consistent_state,
 )
+from ..solvers.step_control import StepControl
 from ._contact import (
     CONTACT_PARAMS,
+    FRICTION_SHAPE_OPTION,
+    IDEAL_OPTION,
     IMPACT_VELOCITY_FLOOR_SPEC,
+    IMPACT_VELOCITY_RULE_OPTION,
     JOINT_GEOMETRIES,
     JOINT_SIZE_NAMES,
+    NORMAL_LAW_OPTION,
     SLIP_VELOCITY_SPEC,
     check_choice,
     check_contact_options,
@@ -45,7 +50,7 @@ from ._contact import (
     complete_joint_geometry,
     joint_geometry_params,
 )
-from .base import ParamSpec, Scene, is_exactly_zero
+from .base import OptionSpec, ParamSpec, Scene, is_exactly_zero
 
 INF = math.inf
 RPM = 2.0 * math.pi / 60.0
@@ -77,7 +82,19 @@ class SliderCrank(Scene):
         "friction_slip_velocity": SLIP_VELOCITY_SPEC,
     }
     default_t_end = 2.0 * 2.0 * math.pi / (5000 * RPM)  # two revolutions
-    default_control = {"rtol": 1e-6, "atol": 1e-9, "dt_max": 1e-4}
+    default_control = StepControl(rtol=1e-6, atol=1e-9, dt_max=1e-4)
+    option_specs = {
+        "ideal": IDEAL_OPTION,
+        "normal_law": NORMAL_LAW_OPTION,
+        "impact_velocity_rule": IMPACT_VELOCITY_RULE_OPTION,
+        "friction_shape": FRICTION_SHAPE_OPTION,
+        "geometry": OptionSpec(
+            "journal_clearance",
+            tuple(JOINT_GEOMETRIES),
+            "which two of the joint's sizes are parameters (journal_radius, clearance, "
+            "bore_radius); the third follows",
+        ),
+    }
 
     def __init__(
         self,

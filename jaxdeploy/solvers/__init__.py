@@ -15,6 +15,7 @@ from .index1 import (
     state_norm,
 )
 from .registry import SOLVER_NAMES, solver_by_name
+from .step_control import StepControl
 from .term import MechanismState, MechanismTerm
 
 __all__ = [
@@ -27,6 +28,7 @@ __all__ = [
     "MechanismODESolver",
     "MechanismState",
     "MechanismTerm",
+    "StepControl",
     "chung_hulbert",
     "project_onto_constraints",
     "solver_by_name",

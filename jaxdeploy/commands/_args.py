@@ -1,0 +1,221 @@
+"""Arguments the commands share, each checked where it is parsed: a bad value stops the command
+with exit code 2 and a message naming the flag and its valid range, before any file is written
+or anything is compiled.
+
+Keep this module light (no JAX, no diffrax at import): `jaxdeploy --help` imports it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+STEP_CONTROL_FLAGS = ("--solver", "--rtol", "--atol", "--dt-max", "--dt")
+SET_HELP = (
+    "scene parameter NAME=VALUE in SI units (repeatable, each NAME once); `jaxdeploy scenes "
+    "SCENE` lists the parameters with their units and valid ranges"
+)
+
+
+def refuse(message: str) -> int:
+    """Print `error: message` to stderr; return 2, the exit code of a refused command line."""
+    print(f"error: {message}", file=sys.stderr)
+    return 2
+
+
+def number_in(
+    flag: str, low: float, high: float, *, unit: str = "", low_open=True, high_open=False
+):
+    """An argparse `type` accepting a finite number in the range (`low_open`/`high_open`
+    exclude the ends), refusing anything else with the flag, the value and the range."""
+    brackets = ("(" if low_open else "[", ")" if high_open else "]")
+    shown_high = "inf" if high == math.inf else f"{high:g}"
+    valid = f"{brackets[0]}{low:g}, {shown_high}{brackets[1]}" + (f" {unit}" if unit else "")
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"{flag} = {text!r} is not a number; it must be in {valid}"
+            ) from None
+        too_low = value <= low if low_open else value < low
+        too_high = value >= high if high_open else value > high
+        if not math.isfinite(value) or too_low or too_high:
+            raise argparse.ArgumentTypeError(
+                f"{flag} = {text} is invalid: it must be finite and in {valid}"
+            )
+        return value
+
+    return parse
+
+
+def positive(flag: str, unit: str = ""):
+    """A finite number > 0."""
+    return number_in(flag, 0.0, math.inf, unit=unit, high_open=True)
+
+
+def integer_at_least(flag: str, low: int, high: int | None = None):
+    """An argparse `type` accepting an integer ≥ `low` (and ≤ `high`)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{flag} = {text!r} is not an integer") from None
+        if value < low or (high is not None and value > high):
+            valid = f"≥ {low}" if high is None else f"in [{low}, {high}]"
+            raise argparse.ArgumentTypeError(f"{flag} = {text} is invalid: it must be {valid}")
+        return value
+
+    return parse
+
+
+def _solver_name(text: str) -> str:
+    from ..solvers.registry import SOLVER_NAMES
+
+    if text not in SOLVER_NAMES:
+        raise argparse.ArgumentTypeError(
+            f"--solver = {text!r} is unknown; valid: {', '.join(SOLVER_NAMES)}"
+        )
+    return text
+
+
+def add_step_control(parser) -> None:
+    """The one argument group of solver and step control, for every command that runs
+    simulations (`simulate`, `sweep`, `fit`, `optimize`); `step_control(args, scene)` turns
+    it into a `StepControl`."""
+    group = parser.add_argument_group(
+        "solver and step control",
+        "Unset values keep the scene's default (`jaxdeploy scenes SCENE` lists it). --rtol or "
+        "--atol: adaptive steps; --dt alone: fixed steps of that size. Recorded with the "
+        "result.",
+    )
+    group.add_argument(
+        "--solver",
+        type=_solver_name,
+        default=None,
+        metavar="NAME",
+        help="generalized_alpha (index-3, implicit), or on the index-1 path tsit5, dopri5, "
+        "dopri8 (explicit), kvaerno3, kvaerno4, kvaerno5 (implicit)",
+    )
+    group.add_argument(
+        "--rtol",
+        type=number_in("--rtol", 0.0, 1.0, high_open=True),
+        default=None,
+        help="relative tolerance of an adaptive step, in (0, 1)",
+    )
+    group.add_argument(
+        "--atol",
+        type=positive("--atol"),
+        default=None,
+        help="absolute tolerance of an adaptive step (positions in m and rad, velocities in "
+        "m/s and rad/s), > 0",
+    )
+    group.add_argument(
+        "--dt-max",
+        type=positive("--dt-max", "s"),
+        default=None,
+        help="largest adaptive step [s], > 0",
+    )
+    group.add_argument(
+        "--dt",
+        type=positive("--dt", "s"),
+        default=None,
+        help="fixed step [s] (alone), or the first adaptive step with --rtol/--atol, > 0",
+    )
+
+
+def step_control(args, scene):
+    """The `StepControl` of a run of `scene` from the shared flags: the scene's default with
+    the flags given applied. `--dt` without `--rtol`/`--atol` makes the steps fixed. A
+    combination no run can honour raises `ValueError` naming the flags."""
+    control = scene.default_control
+    changes = {}
+    if args.solver is not None:
+        changes["solver"] = args.solver
+    if args.dt is not None and args.rtol is None and args.atol is None:
+        if args.dt_max is not None:
+            raise ValueError(
+                "--dt-max bounds adaptive steps: with a fixed step (--dt without --rtol/--atol) "
+                "leave it out"
+            )
+        changes.update(rtol=None, atol=None, dt_min=None, dt_max=None, dt=args.dt)
+    else:
+        for key in ("rtol", "atol", "dt_max", "dt"):
+            if getattr(args, key) is not None:
+                changes[key] = getattr(args, key)
+        if not control.adaptive and not ({"rtol", "atol"} & set(changes)) and changes:
+            if "dt_max" in changes:
+                raise ValueError(
+                    f"--dt-max bounds adaptive steps; scene {scene.name!r} steps with a fixed "
+                    f"dt = {control.dt:g} s: give --rtol/--atol too"
+                )
+    updated = control.replace(**changes) if changes else control
+    if updated.adaptive and updated.dt is not None and updated.dt_max is not None:
+        if updated.dt > updated.dt_max:
+            raise ValueError(
+                f"--dt = {updated.dt:g} s is invalid: the first adaptive step must be ≤ "
+                f"--dt-max = {updated.dt_max:g} s"
+            )
+    return updated
+
+
+def parse_assignments(items, flag: str = "--set") -> dict[str, float]:
+    """`NAME=VALUE` items of a repeatable flag as `{name: float}` (SI units); a malformed
+    item, a value that is not a number or a name given twice raises `ValueError` naming the
+    flag (ranges are the scene's to check: `Scene.resolve_params`)."""
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise ValueError(f"{flag} expects NAME=VALUE, got {item!r}")
+        if name in out:
+            raise ValueError(f"{flag} {name} is given twice ({out[name]!r} and {value.strip()})")
+        try:
+            number = float(value)
+        except ValueError:
+            raise ValueError(f"{flag} {name}: {value!r} is not a number (SI units)") from None
+        out[name] = number
+    return out
+
+
+SCENE_OPTION_HELP = (
+    "scene option KEY=VALUE (repeatable), e.g. impact_velocity_rule=running_max; "
+    "`jaxdeploy scenes SCENE` lists a scene's options with their choices"
+)
+
+
+def parse_pairs(items, flag: str) -> dict:
+    """`KEY=VALUE` items of a repeatable flag; a VALUE that parses as JSON (e.g. `true`,
+    `{"J1": "panel1"}`) is decoded, anything else is kept as a string. A malformed or repeated
+    KEY raises ValueError naming `flag`."""
+    import json
+
+    out = {}
+    for item in items:
+        if "=" not in item:
+            raise ValueError(f"{flag} expects KEY=VALUE, got {item!r}")
+        key, value = (s.strip() for s in item.split("=", 1))
+        if key in out:
+            raise ValueError(f"{flag} {key} is given twice")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out
+
+
+def check_used(scene, names, flag: str) -> None:
+    """Refuse (`ValueError`) a parameter in `names` that the scene's options make irrelevant
+    (`Scene.ignored_params`), naming the option setting that makes it count."""
+    ignored = scene.ignored_params()
+    for name in names:
+        if name in ignored:
+            options = ", ".join(f"{k}={v}" for k, v in scene.options.items())
+            raise ValueError(
+                f"{flag} {name}: scene {scene.name!r} with {options} does not use {name!r}; it "
+                f"counts with --scene-option {ignored[name]}"
+            )

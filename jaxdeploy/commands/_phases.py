@@ -1,0 +1,85 @@
+"""Phases of a command with their wall times, shown as they happen and recorded in its result.
+
+Compilation happens inside the first call of a jitted function, so it cannot be timed by
+wrapping code: JAX reports the time spans of its tracing, lowering and backend compilation
+(`jax.monitoring` events), and a phase's compile time is the union of those spans that fall
+inside it (nested traces of inner functions overlap their caller's span and are counted once).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from contextlib import contextmanager
+
+# JAX's events for the three stages of compiling one program (jax/_src/dispatch.py).
+COMPILE_EVENTS = (
+    "/jax/core/compile/jaxpr_trace_duration",
+    "/jax/core/compile/jaxpr_to_mlir_module_duration",
+    "/jax/core/compile/backend_compile_duration",
+)
+_spans: list[tuple[float, float]] = []
+_listening = False
+
+
+def _listen() -> None:
+    """Collect compile spans from now on (once per process: JAX has no way to unregister)."""
+    global _listening
+    if _listening:
+        return
+    from jax import monitoring
+
+    def record(event, start, end, **kwargs):
+        if event in COMPILE_EVENTS:
+            _spans.append((start, end))
+
+    monitoring.register_event_time_span_listener(record)
+    _listening = True
+
+
+def compile_seconds(start: float, end: float) -> float:
+    """Wall time [s] within [start, end] (time.time()) that JAX spent compiling."""
+    pieces = sorted((max(a, start), min(b, end)) for a, b in _spans if b > start and a < end)
+    total, reach = 0.0, start
+    for a, b in pieces:
+        a = max(a, reach)
+        if b > a:
+            total += b - a
+            reach = b
+    return total
+
+
+class Phases:
+    """`with phases.phase("build"): ...` times a phase, prints its start and duration to
+    stderr (unless `quiet`) and records `{name}_s` in `durations`. `split_compile=True`
+    records the compile time inside the phase separately, as `compile_s`."""
+
+    def __init__(self, quiet: bool = False):
+        self.quiet = quiet
+        self.durations: dict[str, float] = {}
+        self.began = time.time()
+        _listen()
+
+    def say(self, message: str) -> None:
+        if not self.quiet:
+            print(message, file=sys.stderr, flush=True)
+
+    @contextmanager
+    def phase(self, name: str, label: str | None = None, *, split_compile: bool = False):
+        self.say(f"{label or name} ...")
+        start = time.time()
+        yield
+        end = time.time()
+        wall = end - start
+        if split_compile:
+            compiling = min(compile_seconds(start, end), wall)
+            self.durations["compile_s"] = self.durations.get("compile_s", 0.0) + compiling
+            wall -= compiling
+            self.say(f"  compile {compiling:.1f} s, {name} {wall:.1f} s")
+        else:
+            self.say(f"  {wall:.1f} s")
+        self.durations[f"{name}_s"] = self.durations.get(f"{name}_s", 0.0) + wall
+
+    def total(self) -> float:
+        """Wall time [s] since the phases began."""
+        return time.time() - self.began

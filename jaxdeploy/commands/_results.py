@@ -1,0 +1,89 @@
+"""What the keys of `summary.json` mean: each key (or key pattern) with its unit and a one-line
+description. `jaxdeploy simulate` writes the units of a run's quantities as the summary's
+`units` map; docs/results.md shows the descriptions (tests/test_results_keys.py checks that
+every key a scene writes is here and on that page, so a new summary quantity cannot go out
+undocumented).
+
+Units: SI; "-" for a dimensionless number or a count; "" for text and records.
+"""
+
+from __future__ import annotations
+
+import re
+
+PANEL = r"panel\d+"
+# (key or regular expression matching the whole key, unit, description)
+SUMMARY_KEYS = (
+    ("scene", "", "the scene's name"),
+    ("t_end_s", "s", "end time of the run"),
+    ("status", "", '"ok", or when and why the integration stopped'),
+    ("t_reached", "s", "time the integration reached (t_end unless it failed)"),
+    ("t_reached_s", "s", "time the integration reached (t_end unless it failed)"),
+    ("n_steps", "-", "accepted steps"),
+    ("n_rejected", "-", "rejected steps (adaptive step control)"),
+    ("n_newton_iterations", "-", "Newton iterations (generalized-α; null on the ODE path)"),
+    ("wall_time_s", "s", "wall time of the whole command"),
+    (
+        "phases",
+        "s",
+        "wall time of each phase: build_s (mechanism, initial state), compile_s, integrate_s, "
+        "outputs_s (summary quantities, reference runs, trajectory.npz), plots_s",
+    ),
+    ("params", "", "every scene parameter of the run, SI units (`jaxdeploy scenes SCENE`)"),
+    ("scene_options", "", "the scene's options (constructor keywords)"),
+    ("seed", "", "random seed (null: the command draws no random numbers)"),
+    ("step_control", "", "solver and step control (`StepControl.to_json`)"),
+    ("versions", "", "package versions, platform, devices, git commit of the code"),
+    ("units", "", "the unit of every quantity in the summary"),
+    # pendulum
+    ("max_constraint_violation", "m", "largest absolute constraint residual Φ(q), saved states"),
+    # slider_crank
+    ("slider_acc_min", "m/s²", "smallest slider acceleration"),
+    ("slider_acc_max", "m/s²", "largest slider acceleration"),
+    # clearance joints (slider_crank, deploy_array)
+    ("max_contact_force", "N", "largest normal contact force of any clearance joint"),
+    ("max_penetration", "m", "largest penetration of any clearance joint"),
+    (rf"{PANEL}_max_contact_force", "N", "largest normal contact force of the panel's hinge"),
+    (rf"{PANEL}_max_penetration", "m", "largest penetration of the panel's hinge"),
+    # deploy_array
+    ("lock_time", "s", "time the latch engages (null: not within t_end)"),
+    ("lock_time_ideal", "s", "lock time of the ideal-joint mechanism"),
+    (
+        "max_angle_deviation_deploy",
+        "rad",
+        "largest absolute deviation α − α_ideal of the deployment angle up to the lock",
+    ),
+    ("max_angle_deviation_locked", "rad", "largest absolute deviation α − α_ideal after the lock"),
+    (rf"{PANEL}_max_dx", "m", "largest x deviation of the panel's centre from the ideal run"),
+    (rf"{PANEL}_max_dy", "m", "largest y deviation of the panel's centre from the ideal run"),
+    (rf"{PANEL}_tip_max_dx", "m", "largest x deviation of the panel's tip from the ideal run"),
+    (rf"{PANEL}_tip_max_dy", "m", "largest y deviation of the panel's tip from the ideal run"),
+    (
+        rf"{PANEL}_peak_freq_hz",
+        "Hz",
+        "frequency of the largest peak of the panel's post-lock acceleration spectrum",
+    ),
+    ("ideal_reference_status", "", "status of the ideal-joint reference run"),
+)
+
+
+def describe_key(key: str) -> tuple[str, str] | None:
+    """`(unit, description)` of summary key `key`, or None if it is not documented."""
+    for pattern, unit, description in SUMMARY_KEYS:
+        if re.fullmatch(pattern, key):
+            return unit, description
+    return None
+
+
+def units_of(summary: dict) -> dict[str, str]:
+    """`{key: unit}` for the quantities (numbers, and maps of numbers such as `phases`) of
+    `summary`; an undocumented key gets "?" (tests catch it)."""
+    units = {}
+    for key, value in summary.items():
+        if isinstance(value, bool) or not isinstance(value, int | float | dict | type(None)):
+            continue
+        if key in ("params", "scene_options", "step_control", "versions", "seed", "units"):
+            continue
+        found = describe_key(key)
+        units[key] = "?" if found is None else found[0]
+    return units
