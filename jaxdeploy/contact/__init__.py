@@ -25,6 +25,7 @@ from .elastic import (
 from .friction import (
     AbstractFrictionLaw,
     AmbrosioCoulomb,
+    LuGreFriction,
     SmoothCoulomb,
     StribeckFriction,
     regularized_sign,
@@ -64,6 +65,7 @@ __all__ = [
     "RoughElastic",
     "AbstractFrictionLaw",
     "AmbrosioCoulomb",
+    "LuGreFriction",
     "SmoothCoulomb",
     "StribeckFriction",
     "regularized_sign",

@@ -1,4 +1,5 @@
-"""Tangential friction laws `F_T(v_t, F_N)` for the clearance joint.
+"""Tangential friction laws `F_T(v_t, F_N)` for the clearance joint, and the state-based
+LuGre law `F(v, z, F_N)` (its bristle deflection z a state of the mechanism).
 
 Every law returns the *signed* friction magnitude along +t: odd in the sliding speed `v_t`
 (m/s) and bounded by `μ_max F_N`. The caller applies it against sliding, i.e. the journal gets
@@ -17,7 +18,7 @@ import jax.numpy as jnp
 from jax import Array
 from jax.typing import ArrayLike
 
-from .._validation import check_nonnegative, check_positive
+from .._validation import check_nonnegative, check_positive, is_concrete
 
 __all__ = [
     "AbstractFrictionLaw",
@@ -25,6 +26,7 @@ __all__ = [
     "SmoothCoulomb",
     "AmbrosioCoulomb",
     "StribeckFriction",
+    "LuGreFriction",
 ]
 
 
@@ -177,3 +179,71 @@ class StribeckFriction(AbstractFrictionLaw):
         """`μ(v_t) F_N s(v_t)` (N)."""
         sign = regularized_sign(v_t, self.slip_velocity)
         return self.coefficient(v_t) * normal_force * sign
+
+
+class LuGreFriction(eqx.Module):
+    """The LuGre friction law (Canudas de Wit, Olsson, Åström & Lischinsky, *IEEE Trans.
+    Autom. Control* 40 (1995) 419): contact through elastic bristles of mean deflection z [m],
+
+        ż = v − σ0 |v| z / g(v),          g(v) = F_N (μ_C + (μ_S − μ_C) e^{−(v/v_S)²})
+        F = σ0 z + σ1 ż + σ2 v            (signed along +v, N)
+
+    with the Coulomb and static levels written as coefficients times the normal force F_N.
+    At rest under a tangential load F < μ_S F_N the bristles deflect by z = F/σ0 and the
+    contact sticks (no creep, unlike a regularised Coulomb law); at constant sliding speed
+    z → g(v) sgn(v)/σ0 and F → g(v) sgn(v) + σ2 v (Coulomb + Stribeck + viscous). z is a
+    state of the mechanism: `jaxdeploy.mechanism.HingeFriction` keeps it as a continuous
+    internal state, integrated with the equations of motion.
+
+    **Arguments** (defaults: the example of Canudas de Wit et al. 1995, §IV, recalled, with
+    F_C = 1 N and F_S = 1.5 N written as μ_S = 1.5 μ_C):
+
+    - `mu_coulomb` μ_C ≥ 0 (default 0.05, the scenes' hinge friction), `mu_static` μ_S ≥ μ_C
+      (default 0.075);
+    - `stribeck_velocity` v_S > 0 [m/s] (default 1e-3);
+    - `bristle_stiffness` σ0 > 0 [N/m] (default 1e5);
+    - `bristle_damping` σ1 ≥ 0 [N s/m] (default √1e5 ≈ 316);
+    - `viscous` σ2 ≥ 0 [N s/m] (default 0.4).
+    """
+
+    mu_coulomb: Array = eqx.field(converter=_float_array, default=0.05)
+    mu_static: Array = eqx.field(converter=_float_array, default=0.075)
+    stribeck_velocity: Array = eqx.field(converter=_float_array, default=1e-3)
+    bristle_stiffness: Array = eqx.field(converter=_float_array, default=1e5)
+    bristle_damping: Array = eqx.field(converter=_float_array, default=316.22776601683796)
+    viscous: Array = eqx.field(converter=_float_array, default=0.4)
+
+    def __check_init__(self):
+        check_nonnegative("mu_coulomb", self.mu_coulomb)
+        check_nonnegative("mu_static", self.mu_static)
+        check_positive("stribeck_velocity", self.stribeck_velocity, unit="m/s")
+        check_positive("bristle_stiffness", self.bristle_stiffness, unit="N/m")
+        check_nonnegative("bristle_damping", self.bristle_damping, unit="N s/m")
+        check_nonnegative("viscous", self.viscous, unit="N s/m")
+        if is_concrete(self.mu_static) and is_concrete(self.mu_coulomb):
+            if float(self.mu_static) < float(self.mu_coulomb):
+                raise ValueError(
+                    f"mu_static = {float(self.mu_static)} is invalid: it must be ≥ mu_coulomb "
+                    f"= {float(self.mu_coulomb)}"
+                )
+
+    def steady_level(self, v: ArrayLike, normal_force: ArrayLike) -> Array:
+        """`g(v)` [N], the sliding friction without its viscous part."""
+        v = jnp.asarray(v, dtype=float)
+        stribeck = jnp.exp(-((v / self.stribeck_velocity) ** 2))
+        return normal_force * (self.mu_coulomb + (self.mu_static - self.mu_coulomb) * stribeck)
+
+    def rate(self, v: ArrayLike, z: ArrayLike, normal_force: ArrayLike) -> Array:
+        """`ż = v − σ0 |v| z / g(v)` [m/s]."""
+        v = jnp.asarray(v, dtype=float)
+        return v - self.bristle_stiffness * jnp.abs(v) * z / self.steady_level(v, normal_force)
+
+    def force(self, v: ArrayLike, z: ArrayLike, normal_force: ArrayLike) -> Array:
+        """`F = σ0 z + σ1 ż + σ2 v` [N], signed along +v."""
+        zdot = self.rate(v, z, normal_force)
+        return self.bristle_stiffness * z + self.bristle_damping * zdot + self.viscous * v
+
+    def steady_force(self, v: ArrayLike, normal_force: ArrayLike) -> Array:
+        """The sliding force at constant `v`: `g(v) sgn(v) + σ2 v` [N]."""
+        v = jnp.asarray(v, dtype=float)
+        return self.steady_level(v, normal_force) * jnp.sign(v) + self.viscous * v

@@ -38,11 +38,18 @@ class AbstractElement(eqx.Module):
       model discontinuously at a step boundary (an O(h) effect that adaptive solvers localise,
       see `switched`);
     - `potential_energy(kin, memory)` for the conservative part of their forces (energy
-      balances, `mechanism/energy.py`).
+      balances, `mechanism/energy.py`);
+    - `internal_rates(kin, t, memory)` for *continuous* internal states (a friction law's
+      bristle deflection): arrays kept in the memory under the key `"internal"` (a dict
+      `{name: array}` that `init_memory` creates and `memory_after_step` passes on). Unlike
+      the rest of the memory they are integrated with the mechanism's ODE, `ż = rates`, by
+      the index-1 solvers (`jaxdeploy.solvers.MechanismODESolver`), error-controlled with
+      `q` and `q̇`; `has_internal_state` says an element has them.
     """
 
     n_constraints: ClassVar[int] = 0
     has_memory: ClassVar[bool] = False
+    has_internal_state: ClassVar[bool] = False
     switch_flags: ClassVar[tuple[str, ...]] = ()
 
     def constraint(self, kin: Kinematics, t) -> Array:
@@ -82,6 +89,11 @@ class AbstractElement(eqx.Module):
     def memory_after_step(self, memory, kin: Kinematics, step):
         """Memory after an accepted step of length `step` (s) that ended at state `kin`."""
         return memory
+
+    def internal_rates(self, kin: Kinematics, t, memory) -> dict:
+        """`{name: ż}` of the continuous internal states `memory["internal"]` (same shapes),
+        at state `kin` and time t; only for elements with `has_internal_state`."""
+        return {}
 
     def event_fraction(self, memory) -> Array | None:
         """Where inside the last accepted step an event of this element's memory happened

@@ -370,3 +370,58 @@ class PreloadedLatch(AbstractElement):
 
     def bodies(self):
         return (self.body_a, self.body_b)
+
+
+class HingeFriction(AbstractElement):
+    """Friction torque of a hinge with a state-based friction law (e.g.
+    `jaxdeploy.contact.LuGreFriction`) whose state z is integrated with the mechanism.
+
+    The pin of radius r is pressed into its bore with the normal force F_N (e.g. a latch's
+    preload); the sliding speed at the pin's surface is `v = r (θ̇_b − θ̇_a)` and the friction
+    force `F(v, z, F_N)` of the law gives the torque `−r F` on body_b (reaction on body_a).
+    The law's state z (for LuGre the bristle deflection, m) is the element's continuous
+    internal state, `memory["internal"]["bristle"]`, with `ż` from `law.rate(v, z, F_N)`:
+    only the index-1 solvers integrate it (`jaxdeploy.solvers.MechanismODESolver`;
+    generalized-α refuses such mechanisms). It starts at 0 (unloaded bristles).
+
+    Energy: no potential (the bristles' elastic energy ½ σ0 z² ≤ ½ (μ_S F_N)²/σ0 depends on
+    the state z, not on q); `EnergyMeter` refuses elements with internal states.
+
+    **Arguments:** `body_a`, `body_b`; `law` (duck-typed: `rate(v, z, F_N)` and
+    `force(v, z, F_N)`); `normal_force` F_N [N] > 0; `radius` r [m] > 0.
+    """
+
+    body_a: str = static()
+    body_b: str = static()
+    law: object
+    normal_force: float = param()
+    radius: float = param()
+    has_memory: ClassVar[bool] = True
+    has_internal_state: ClassVar[bool] = True
+
+    def __check_init__(self):
+        check_positive("HingeFriction.normal_force", self.normal_force, "N")
+        check_positive("HingeFriction.radius", self.radius, "m")
+
+    def _speed(self, kin: Kinematics):
+        """Sliding speed at the pin's surface [m/s]."""
+        return self.radius * (kin.angular_velocity(self.body_b) - kin.angular_velocity(self.body_a))
+
+    def init_memory(self, kin: Kinematics):
+        return {"internal": {"bristle": jnp.zeros((), dtype=kin.q.dtype)}}
+
+    def internal_rates(self, kin: Kinematics, t, memory):
+        z = memory["internal"]["bristle"]
+        return {"bristle": self.law.rate(self._speed(kin), z, self.normal_force)}
+
+    def friction_force(self, kin: Kinematics, memory):
+        """`F(v, z, F_N)` [N], signed along the relative sliding of body_b."""
+        z = memory["internal"]["bristle"]
+        return self.law.force(self._speed(kin), z, self.normal_force)
+
+    def wrenches(self, kin: Kinematics, t, memory):
+        torque = -self.radius * self.friction_force(kin, memory)
+        return _torque_pair(self.body_a, self.body_b, torque)
+
+    def bodies(self):
+        return (self.body_a, self.body_b)

@@ -65,6 +65,13 @@ class EnergyMeter(AbstractElement):
             raise ValueError(
                 f"EnergyMeter meters force elements; {type(self.inner).__name__} is a constraint"
             )
+        if self.inner.has_internal_state:
+            # Its continuous states would sit inside the meter's memory, where the solvers
+            # neither integrate nor error-control them.
+            raise ValueError(
+                f"EnergyMeter cannot meter {type(self.inner).__name__}: elements with "
+                "continuous internal states (e.g. HingeFriction) are not supported by the meter"
+            )
 
     def bodies(self):
         return self.inner.bodies()

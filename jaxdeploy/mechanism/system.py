@@ -276,6 +276,50 @@ class Mechanism(eqx.Module):
         ]
         return jnp.any(jnp.stack(flips)) if flips else jnp.array(False)
 
+    # --- continuous internal states (AbstractElement.internal_rates) ------------------------------
+
+    @property
+    def has_internal_state(self) -> bool:
+        return any(e.has_internal_state for e in self.elements)
+
+    def internal_vector(self, memory) -> Array:
+        """The elements' continuous internal states (`memory[i]["internal"]`), flattened into
+        one vector, in element order and sorted names; empty when there are none."""
+        parts = [
+            jnp.ravel(m["internal"][name])
+            for e, m in zip(self.elements, memory, strict=True)
+            if e.has_internal_state
+            for name in sorted(m["internal"])
+        ]
+        return jnp.concatenate(parts) if parts else jnp.zeros((0,))
+
+    def with_internal(self, memory, z):
+        """`memory` with its internal states replaced by the flat vector `z`
+        (`internal_vector`'s layout)."""
+        out, start = [], 0
+        for e, m in zip(self.elements, memory, strict=True):
+            if not e.has_internal_state:
+                out.append(m)
+                continue
+            internal = {}
+            for name in sorted(m["internal"]):
+                shape = jnp.shape(m["internal"][name])
+                size = int(np.prod(shape))
+                internal[name] = jnp.reshape(z[start : start + size], shape)
+                start += size
+            out.append({**m, "internal": internal})
+        return tuple(out)
+
+    def internal_rates(self, q, v, t, memory) -> Array:
+        """`ż` of `internal_vector(memory)` at `(q, q̇, t)`."""
+        kin = self.kinematics(q, v)
+        parts = []
+        for e, m in zip(self.elements, memory, strict=True):
+            if e.has_internal_state:
+                rates = e.internal_rates(kin, t, m)
+                parts += [jnp.ravel(rates[name]) for name in sorted(m["internal"])]
+        return jnp.concatenate(parts) if parts else jnp.zeros((0,))
+
     # --- index-1 form and energy -----------------------------------------------------------------
 
     def accelerations(self, q, v, t, memory, baumgarte=0.0, linear_solve="range_space"):

@@ -347,6 +347,13 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
         return 3
 
     def init(self, terms, t0, t1, y0: MechanismState, args):
+        if _mechanism_of(terms).has_internal_state:
+            # Its second-order scheme has no stage for a first-order state ż = f(q, q̇, z).
+            raise ValueError(
+                "solver='generalized_alpha' cannot integrate elements with continuous internal "
+                "states (e.g. LuGre friction's bristle deflection); use an index-1 solver, "
+                "e.g. solver='tsit5' or solver='kvaerno5'"
+            )
         size = y0.q.shape[0] + y0.lam.shape[0]
         return GeneralizedAlphaState(
             a=y0.qdd,

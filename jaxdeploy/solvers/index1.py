@@ -77,17 +77,25 @@ def project_onto_constraints(mechanism: Mechanism, q, v, t, iterations: int = 2)
 
 class Index1Field(eqx.Module):
     """`d(q, q̇)/dt = (q̇, q̈)` with `q̈` from the stabilised index-1 system; `args` is the
-    elements' memory for the step."""
+    elements' memory for the step. With continuous internal states z (a mechanism whose
+    elements have `has_internal_state`) the state is `(q, q̇, z)` and `ż` comes from
+    `Mechanism.internal_rates`, the forces seeing the current z."""
 
     mechanism: Mechanism
     baumgarte: float = eqx.field(static=True, default=0.0)
     linear_solve: str = eqx.field(static=True, default="range_space")
 
     def __call__(self, t, y, memory):
-        q, v = y
+        if len(y) == 3:
+            q, v, z = y
+            memory = self.mechanism.with_internal(memory, z)
+        else:
+            q, v = y
         qdd, _ = stabilised_accelerations(
             self.mechanism, q, v, t, memory, self.baumgarte, self.linear_solve
         )
+        if len(y) == 3:
+            return v, qdd, self.mechanism.internal_rates(q, v, t, memory)
         return v, qdd
 
 
@@ -123,7 +131,8 @@ class MechanismInterpolation(dfx.AbstractLocalInterpolation):
         if t1 is not None:
             return jax.tree.map(lambda b, a: b - a, self.evaluate(t1), self.evaluate(t0))
         s = (t0 - self.t0) / (self.t1 - self.t0)
-        q, v = self.inner.evaluate(t0)
+        # Internal states (if any, the third part) are output through the memory, linear.
+        q, v = self.inner.evaluate(t0)[:2]
         dq, dv = self.correction
 
         def linear(a, b):
@@ -153,6 +162,10 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
     Dense output is the inner solver's own interpolant for `q` and `q̇` with the projection's
     correction spread linearly over the step, linear for `q̈`, `λ` and memory
     (`MechanismInterpolation`).
+
+    Continuous internal states of elements (`AbstractElement.internal_rates`, kept in the
+    memory) are integrated by the inner solver with `(q, q̇)`, and their error estimate is
+    part of the step's error (`state_norm`); the projection leaves them alone.
     """
 
     solver: dfx.AbstractSolver
@@ -185,8 +198,16 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
     def error_order(self, terms):
         return self.solver.error_order(self._inner_term(terms))
 
+    @staticmethod
+    def _inner_state(mech, q, v, memory):
+        if mech.has_internal_state:
+            return q, v, mech.internal_vector(memory)
+        return q, v
+
     def init(self, terms, t0, t1, y0: MechanismState, args):
-        inner = self.solver.init(self._inner_term(terms), t0, t1, (y0.q, y0.v), y0.memory)
+        mech = _mechanism_of(terms)
+        y_inner = self._inner_state(mech, y0.q, y0.v, y0.memory)
+        inner = self.solver.init(self._inner_term(terms), t0, t1, y_inner, y0.memory)
         return MechanismODEState(inner)
 
     def func(self, terms, t0, y0, args):
@@ -197,13 +218,24 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
         inner_term = self._inner_term(terms)
         h = t1 - t0
         memory = mech.memory_for_step(y0.memory, y0.q, y0.v)
-        (q1_inner, v1_inner), err, inner_dense, inner_state, result = self.solver.step(
-            inner_term, t0, t1, (y0.q, y0.v), memory, solver_state.inner, made_jump
+        internal = mech.has_internal_state
+        y1_inner, err, inner_dense, inner_state, result = self.solver.step(
+            inner_term,
+            t0,
+            t1,
+            self._inner_state(mech, y0.q, y0.v, memory),
+            memory,
+            solver_state.inner,
+            made_jump,
         )
+        q1_inner, v1_inner = y1_inner[:2]
         q1, v1 = q1_inner, v1_inner
         if self.project:
             q1, v1 = project_onto_constraints(mech, q1, v1, t1)
-        memory1 = mech.memory_after_step(memory, q1, v1, h)
+        # The internal states integrated over the step enter the memory update (which passes
+        # them on) and the next step.
+        stepped = mech.with_internal(memory, y1_inner[2]) if internal else memory
+        memory1 = mech.memory_after_step(stepped, q1, v1, h)
         # The accelerations at the step's end with the memory the next step will use
         # (`memory_for_step` is what the next step computes first): they are the output at t1
         # and, for a first-same-as-last method (Tsit5, Kvaerno5), the next step's first
@@ -214,17 +246,25 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
             mech, q1, v1, t1, memory_next, self.baumgarte, self.linear_solve
         )
         if _is_first_same_as_last(inner_state):
-            inner_state = (jnp.zeros_like(inner_state[0]), (v1, qdd1))
+            f1 = (v1, qdd1)
+            if internal:
+                f1 += (mech.internal_rates(q1, v1, t1, memory_next),)
+            inner_state = (jnp.zeros_like(inner_state[0]), f1)
         y1 = MechanismState(q1, v1, qdd1, lam1, memory1)
 
         if err is None:
             err_q, err_v = jnp.zeros_like(q1), jnp.zeros_like(v1)
+            err_z = jnp.zeros_like(y1_inner[2]) if internal else None
         else:
-            err_q, err_v = err
+            err_q, err_v = err[:2]
+            err_z = err[2] if internal else None
         if self.resolve_switches:
             switched = mech.switched(memory, memory1)
             err_v = jnp.where(switched, jnp.maximum(jnp.abs(err_v), jnp.abs(v1 - y0.v)), err_v)
         zeros = jax.tree_util.tree_map(jnp.zeros_like, (qdd1, lam1, memory1))
+        if internal:
+            # The internal states' error where `state_norm` looks for it.
+            zeros = (*zeros[:2], mech.with_internal(zeros[2], err_z))
         y_error = jax.lax.stop_gradient(MechanismState(err_q, err_v, *zeros))
 
         dense_info = dict(
@@ -240,8 +280,10 @@ def _is_first_same_as_last(inner_state) -> bool:
 
 
 def state_norm(y) -> jax.Array:
-    """RMS norm over positions and velocities only (the integrated variables), for the
-    step-size controller; other pytrees fall back to `diffrax.rms_norm`."""
+    """RMS norm over the integrated variables only — positions, velocities and the elements'
+    continuous internal states (`memory[i]["internal"]`) — for the step-size controller;
+    other pytrees fall back to `diffrax.rms_norm`."""
     if isinstance(y, MechanismState):
-        return optx.rms_norm((y.q, y.v))
+        internal = [m["internal"] for m in y.memory if isinstance(m, dict) and "internal" in m]
+        return optx.rms_norm((y.q, y.v, *internal))
     return optx.rms_norm(y)
