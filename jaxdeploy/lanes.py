@@ -59,7 +59,7 @@ import jax.numpy as jnp
 from diffrax._integrate import _clip_to_end
 
 from .simulation import Trajectory, _integrate, _saved, _setup, simulate, solver_stats
-from .solvers import MechanismState, MechanismTerm
+from .solvers import MechanismState, MechanismTerm, tracked_extremes
 from .solvers.wrapped_controller import WrappedController
 
 # The options of `simulate` a lane-refilled batch accepts (the rest concern differentiation or
@@ -76,6 +76,7 @@ LANE_OPTIONS = (
     "solver",
     "step_ts",
     "locate_events",
+    "extreme_samples",
 )
 DEFAULT_SEGMENT_STEPS = 8
 
@@ -302,7 +303,7 @@ def simulate_in_lanes(
             },
             lane.solver_state,
         )
-        return lane.ts, lane.ys, result, stats
+        return lane.ts, lane.ys, result, stats, lane.t, tracked_extremes(lane.solver_state)
 
     first = jax.vmap(fresh)(jnp.arange(lanes))
     no_result = jax.vmap(lambda _: dfx.RESULTS.successful)(jnp.zeros(lanes))
@@ -345,7 +346,7 @@ def simulate_in_lanes(
         )
         return lanes_state, next_case + jnp.sum(refill), out
 
-    _, _, (saved_ts, saved_ys, result, stats) = jax.lax.while_loop(
+    _, _, (saved_ts, saved_ys, result, stats, t_reached, extremes) = jax.lax.while_loop(
         cond, body, (first, jnp.array(lanes), blank)
     )
-    return Trajectory(saved_ts, *_saved(saved_ys), result, stats)
+    return Trajectory(saved_ts, *_saved(saved_ys), result, stats, None, t_reached, extremes)

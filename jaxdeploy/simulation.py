@@ -26,7 +26,11 @@ from .solvers import (
     MechanismState,
     MechanismTerm,
     StepControl,
+    TrackExtremes,
     state_norm,
+    stop_at_non_finite,
+    tracked_extremes,
+    untracked,
 )
 from .solvers.step_control import DEFAULT_MAX_STEPS
 
@@ -40,7 +44,12 @@ class Trajectory(eqx.Module):
     `result` (a diffrax RESULTS code), `stats` (steps, accepted, rejected, Newton iterations);
     `step_times`: with `simulate(..., replay_steps=...)`, the ends of the steps taken (padded
     with +inf; pass them as `replay_steps` to integrate other parameters over the same steps),
-    otherwise None.
+    otherwise None. `t_reached` [s]: the time the integration reached (`t_end` when it
+    succeeded; where it stopped when it failed, which can lie between two saved times);
+    `extremes`: the run's extremes over every accepted step, independent of the output times
+    (`jaxdeploy.mechanism.extremes_at`: `acceleration_min`/`_max` (n,), and with clearance
+    joints `normal_force_max`/`penetration_max` (k,)). Both None for a trajectory assembled
+    without them.
     """
 
     ts: jax.Array
@@ -52,19 +61,27 @@ class Trajectory(eqx.Module):
     result: dfx.RESULTS
     stats: dict
     step_times: jax.Array | None = None
+    t_reached: jax.Array | None = None
+    extremes: dict | None = None
 
     @property
     def ok(self) -> bool:
         return bool(self.result == dfx.RESULTS.successful)
 
+    def time_reached(self) -> float:
+        """The time [s] the integration reached (`t_reached`; for a trajectory without it,
+        the last saved time with a finite state)."""
+        if self.t_reached is not None:
+            return float(self.t_reached)
+        ts = np.asarray(self.ts)
+        finite = np.isfinite(ts) & np.all(np.isfinite(np.asarray(self.q)), axis=-1)
+        return float(ts[finite].max()) if finite.any() else float("nan")
+
     def status(self) -> str:
         """`"ok"` or a message with the time reached and the reason."""
         if self.ok:
             return "ok"
-        ts = np.asarray(self.ts)
-        finite = np.isfinite(ts) & np.all(np.isfinite(np.asarray(self.q)), axis=-1)
-        t_reached = float(ts[finite].max()) if finite.any() else float("nan")
-        return f"failed after t = {t_reached:.6g} s: {dfx.RESULTS[self.result]}"
+        return f"failed after t = {self.time_reached():.6g} s: {dfx.RESULTS[self.result]}"
 
 
 class ReplaySteps(dfx.AbstractStepSizeController):
@@ -112,7 +129,10 @@ def _inner_scan_kind_for(adjoint, solver):
 
 def _integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **options):
     """`diffrax.diffeqsolve` of the mechanism from `y0` over [t0, t_end], never throwing: a
-    failure is reported in the solution's `result`. `options`: `saveat`, `adjoint`, …"""
+    failure is reported in the solution's `result`, and a run whose steps keep producing
+    non-finite values stops with `RESULTS.nonfinite` at its last finite state
+    (`jaxdeploy.solvers.stop_at_non_finite`). `options`: `saveat`, `adjoint`, …"""
+    time_scale = jnp.maximum(jnp.abs(t0), jnp.abs(t_end))
     return dfx.diffeqsolve(
         MechanismTerm(mechanism),
         solver,
@@ -120,7 +140,7 @@ def _integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **o
         t1=t_end,
         dt0=dt0,
         y0=y0,
-        stepsize_controller=controller,
+        stepsize_controller=stop_at_non_finite(controller, jax.lax.stop_gradient(time_scale)),
         max_steps=max_steps,
         throw=False,
         **options,
@@ -206,7 +226,11 @@ def _solve(mechanism, y0, t0, t_end, dt0, ts, solver, controller, max_steps, pro
         solver,
         controller,
         max_steps,
-        saveat=dfx.SaveAt(ts=ts, solver_state=True),
+        # The second output is the time the run reached (t_end unless it failed).
+        saveat=dfx.SaveAt(
+            subs=[dfx.SubSaveAt(ts=ts), dfx.SubSaveAt(t1=True, fn=lambda t, y, args: None)],
+            solver_state=True,
+        ),
         progress_meter=meter,
         adjoint=adjoint,
     )
@@ -233,6 +257,7 @@ def simulate(
     step_ts=None,
     replay_steps=False,
     locate_events=True,
+    extreme_samples: int = 1,
 ) -> Trajectory:
     """Integrate `mechanism` from `initial` (a `consistent_state`) to `t_end`.
 
@@ -273,6 +298,9 @@ def simulate(
       that event (`jaxdeploy.solvers.LocateEvents`), so v⁻ is as accurate as the state;
       without it v⁻'s error is set by the step length, not by the tolerance. Only mechanisms
       with such events trace it.
+    - `extreme_samples`: interior points of every step, besides its end, at which the run's
+      extremes (`Trajectory.extremes`) are evaluated on the dense output (default 1, the
+      midpoint; `jaxdeploy.solvers.TrackExtremes`).
 
     **Returns:** a `Trajectory`; check `.ok` / `.status()`: a failed solve keeps the states it
     finished and says when and why it stopped.
@@ -296,6 +324,7 @@ def simulate(
         step_ts=step_ts,
         replay_steps=replay_steps,
         locate_events=locate_events,
+        extreme_samples=extreme_samples,
     )
     sol = _solve(
         mechanism,
@@ -310,12 +339,15 @@ def simulate(
         progress,
         run.adjoint,
     )
+    (ts, end), (ys, _) = sol.ts, sol.ys
     return Trajectory(
-        sol.ts,
-        *_saved(sol.ys),
+        ts,
+        *_saved(ys),
         sol.result,
         solver_stats(sol.stats, sol.solver_state),
         run.step_times,
+        end[0],
+        tracked_extremes(sol.solver_state),
     )
 
 
@@ -354,6 +386,7 @@ def _setup(
     step_ts=None,
     replay_steps=False,
     locate_events=True,
+    extreme_samples=1,
 ) -> _Setup:
     """Validate `simulate`'s arguments and build its solver, step-size controller, initial
     state and times (shared with the lane-refilled batches of `jaxdeploy.lanes`, which must
@@ -376,7 +409,7 @@ def _setup(
     if not control.adaptive and isinstance(solver, GeneralizedAlpha):
         solver = replace(solver, estimate_error=False)
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
-    solver = _inner_scan_kind_for(adjoint, solver)
+    solver = TrackExtremes(_inner_scan_kind_for(adjoint, solver), samples=extreme_samples)
     y0 = MechanismState(initial.q, initial.v, initial.qdd, initial.lam, initial.memory)
     ts = _save_times(t0, t_end, n_save, ts)
     # Times are data too: a new t_end or t0 does not recompile.
@@ -435,6 +468,7 @@ def solver_stats(stats, solver_state) -> dict:
     """diffrax's step counts with the solver's own counters (generalized-α's Newton
     iterations and Jacobian evaluations), as `Trajectory.stats`."""
     stats = dict(stats)
+    solver_state = untracked(solver_state)
     if solver_state is not None and hasattr(solver_state, "newton_iterations"):
         stats["num_newton_iterations"] = solver_state.newton_iterations
     if solver_state is not None and hasattr(solver_state, "jacobian_evaluations"):

@@ -1,15 +1,20 @@
-"""A NaN state gives NaN out of every contact law (issue 19 item 5): a comparison with NaN is
-false, so a `where`/`maximum` that picks a branch on it would turn a broken state into a
-plausible force (the rough law gave 317 N at a NaN penetration, Hertz gave 0)."""
+"""Failure is visible (issue 19 item 5). A NaN state gives NaN out of every contact law: a
+comparison with NaN is false, so a `where`/`maximum` that picks a branch on it would turn a
+broken state into a plausible force (the rough law gave 317 N at a NaN penetration, Hertz gave
+0). A run that goes NaN stops and reports the time it reached."""
 
 import inspect
 
+import diffrax as dfx
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from jaxdeploy import contact
 from jaxdeploy.mechanism import Body, Mechanism, RevoluteClearance
+from jaxdeploy.mechanism.element import AbstractElement, Wrench
+from jaxdeploy.scenes.pendulum import Pendulum
+from jaxdeploy.simulation import simulate
 
 NAN = float("nan")
 STIFFNESS = 1e10  # N/m^1.5
@@ -130,3 +135,64 @@ def test_clearance_joint_forces_are_nan_at_a_nan_state(elastic):
         assert np.isnan(float(fn)) and np.isnan(float(ft))
     fn, ft, _ = joint.contact_forces(mech.kinematics(q, v.at[1].set(NAN)), memory)
     assert np.isnan(float(fn)) and np.isnan(float(ft))
+
+
+# --- a run that goes NaN stops and says when ---------------------------------------------------
+
+
+class _NaNAfter(AbstractElement):
+    """A force that turns NaN after `time` [s]: a vector field that breaks mid-run."""
+
+    body: str
+    time: float
+
+    def bodies(self):
+        return (self.body,)
+
+    def wrenches(self, kin, t, memory):
+        f = jnp.where(t > self.time, jnp.nan, 0.0)
+        return [Wrench(self.body, force=jnp.stack([f, 0.0 * f]))]
+
+
+T_NAN = 2e-3  # s
+
+
+@pytest.fixture(scope="module")
+def breaking_pendulum():
+    scene = Pendulum()
+    params = scene.resolve_params({"initial_angle": -1.0})
+    mech = scene.build(params)
+    mech = Mechanism(mech.bodies, (*mech.elements, _NaNAfter("rod", T_NAN)), mech.ground_points)
+    return mech, scene.initial_state(params, mech)
+
+
+@pytest.mark.parametrize(
+    "control",
+    [
+        dict(solver="tsit5", rtol=1e-8, atol=1e-10),
+        dict(rtol=1e-8, atol=1e-10),
+        dict(solver="tsit5", dt=1e-4),
+        dict(dt=1e-4),
+    ],
+    ids=["tsit5-adaptive", "gen-alpha-adaptive", "tsit5-fixed", "gen-alpha-fixed"],
+)
+def test_a_run_that_goes_nan_stops_there_with_the_time(breaking_pendulum, control):
+    """Before: adaptive runs crept towards T_NAN until `max_steps` (reported as that), and a
+    fixed-step Tsit5 run integrated NaN to the end and reported success. Now every path stops
+    with `nonfinite` at the last finite state, within one step of T_NAN, and the time reached
+    lies between two saved times (saves every 4 ms: the last one is t = 0)."""
+    mech, s0 = breaking_pendulum
+    tr = simulate(mech, s0, 8e-3, n_save=3, max_steps=100_000, **control)
+    assert tr.result == dfx.RESULTS.nonfinite, tr.status()
+    step = control.get("dt", 1e-4)
+    assert T_NAN - step - 1e-12 <= tr.time_reached() <= T_NAN + 1e-12, tr.time_reached()
+    assert tr.status().startswith(f"failed after t = {tr.time_reached():.6g} s: Nonfinite")
+    assert int(tr.stats["num_steps"]) < 1000  # stopped, not ground down to max_steps
+    saved = np.isfinite(np.asarray(tr.ts))
+    assert saved.sum() == 1 and np.all(np.isfinite(np.asarray(tr.q)[saved]))
+
+
+def test_time_reached_is_the_end_of_a_successful_run(breaking_pendulum):
+    mech, s0 = breaking_pendulum
+    tr = simulate(mech, s0, 1.5e-3, n_save=4, solver="tsit5", rtol=1e-8, atol=1e-10)
+    assert tr.ok and tr.time_reached() == 1.5e-3

@@ -12,7 +12,7 @@ import weakref
 import numpy as np
 
 from ..io import atomic_savefig
-from .contact_forces import clearance_joint_history
+from .contact_forces import clearance_joint_history, contact_extremes
 from .spectra import interval_mean_rate, peak_frequency, welch_psd
 
 # Welch segment [s] of the panel acceleration spectra: 0.1 s, resolution 10 Hz, about the
@@ -158,8 +158,14 @@ def deploy_array_summary(scene, params, mechanism, trajectory) -> dict:
             if after.sum() > 8
             else float("nan")
         )
-    forces = [np.asarray(h["normal_force"]) for h in o["joints"].values()]
-    summary["max_contact_force"] = float(max(f.max() for f in forces)) if forces else 0.0
+    # Contact extremes tracked over every accepted step (independent of the saved times).
+    joints = contact_extremes(mechanism, trajectory)
+    for index, extremes in joints.items():
+        owner = mechanism.elements[index].journal_body
+        summary[f"{owner}_max_contact_force"] = extremes["max_normal_force"]
+        summary[f"{owner}_max_penetration"] = extremes["max_penetration"]
+    forces = [j["max_normal_force"] for j in joints.values()]
+    summary["max_contact_force"] = max(forces, default=0.0)
     summary["ideal_reference_status"] = o["ideal_status"]
     return summary
 

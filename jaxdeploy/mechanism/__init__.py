@@ -22,6 +22,8 @@ from .meters import (
     add_clock,
     energy_balance,
     energy_moved,
+    extremes_at,
+    merge_extremes,
     metered,
     step_log,
 )
@@ -56,6 +58,8 @@ __all__ = [
     "consistent_state",
     "energy_balance",
     "energy_moved",
+    "extremes_at",
+    "merge_extremes",
     "metered",
     "step_log",
 ]

@@ -1,5 +1,6 @@
 """Instruments for simulated runs: energy bookkeeping (`EnergyMeter`, `metered`,
-`energy_balance`) and a step-size log (`StepClock`, `add_clock`).
+`energy_balance`), a step-size log (`StepClock`, `add_clock`) and the quantities whose
+extremes a run tracks (`extremes_at`, `merge_extremes`).
 
 **Energy.**
 The balance of a mechanism whose ideal joints are scleronomic (no driving constraints):
@@ -28,6 +29,12 @@ coordinate is the time, exactly for any integrator that is exact on constant vel
 It is an instrument: it adds three coordinates whose error estimate is zero, which scales an
 RMS error norm by sqrt(n/(n+3)) — say so when reporting steps taken with it.
 
+**Extremes.** The largest contact force of an impact lasts microseconds, far less than the
+spacing of any saved grid, so a maximum taken over saved states depends on the grid (3.3× on
+deploy_array between 2001 and 20001 saved states). `extremes_at` gives, at one state, the
+quantities a summary reports as extremes; the solvers fold them over every accepted step
+(`jaxdeploy.solvers.TrackExtremes`), so the run's extremes do not depend on the output times.
+
 Reference: the work–energy theorem for constrained systems, e.g. Géradin & Cardona, *Flexible
 Multibody Dynamics* (2001), §6.
 """
@@ -43,6 +50,7 @@ import numpy as np
 
 from .assembly import ConsistentState
 from .bodies import Body, Kinematics
+from .clearance import RevoluteClearance
 from .element import AbstractElement
 from .system import Mechanism
 
@@ -259,3 +267,43 @@ def energy_moved(balance: dict) -> float:
     (a residual relative to E0 alone would be meaningless for a mechanism released from rest)."""
     kinetic, dissipated = np.asarray(balance["kinetic"]), np.asarray(balance["dissipated"])
     return float(np.max(kinetic + dissipated) + np.max(np.abs(np.asarray(balance["injected"]))))
+
+
+def extremes_at(mechanism: Mechanism, q, v, qdd, memory) -> dict:
+    """The quantities whose extremes a run tracks, at one state `(q, q̇, q̈, memory)`:
+
+    - `acceleration_min`, `acceleration_max`: q̈ (n,) [m/s², rad/s²] (absent if `qdd` is None);
+    - for the clearance joints, in the order of `mechanism.find(RevoluteClearance)` (the keys
+      are absent, and nothing of this is traced, without any): `normal_force_max` (k,) [N],
+      the net normal force on the journal `F_N(δ) − F_N(δ')` (`RevoluteClearance.
+      contact_forces`, with the joint's memory for a step from this state), and
+      `penetration_max` (k,) [m], δ = |e| − c.
+
+    `merge_extremes` folds two of these (minimum of `*_min`, maximum of `*_max`).
+    """
+    out = {} if qdd is None else {"acceleration_min": qdd, "acceleration_max": qdd}
+    joints = mechanism.find(RevoluteClearance)
+    if not joints:
+        return out
+    kin = mechanism.kinematics(q, v)
+    forces, penetrations = [], []
+    for index in joints:
+        joint = mechanism.elements[index]
+        joint_memory = memory[index]
+        if joint.has_memory:
+            joint_memory = joint.memory_for_step(joint_memory, kin)
+        fn, _, geometry = joint.contact_forces(kin, joint_memory)
+        forces.append(fn)
+        penetrations.append(geometry.penetration)
+    out["normal_force_max"] = jnp.stack(forces)
+    out["penetration_max"] = jnp.stack(penetrations)
+    return out
+
+
+def merge_extremes(a: dict, b: dict) -> dict:
+    """Elementwise the smaller of `*_min` and the larger of `*_max` entries (NaN wins: a run
+    that met a NaN shows it)."""
+    merged = {
+        k: jnp.minimum(a[k], b[k]) if k.endswith("_min") else jnp.maximum(a[k], b[k]) for k in b
+    }
+    return {**a, **merged}

@@ -1,6 +1,7 @@
 """Time integrators for mechanisms."""
 
 from .event_location import LocateEvents
+from .extremes import TrackedState, TrackExtremes, tracked_extremes, untracked
 from .generalized_alpha import (
     AlphaCoefficients,
     GeneralizedAlpha,
@@ -14,6 +15,7 @@ from .index1 import (
     stabilised_accelerations,
     state_norm,
 )
+from .non_finite import stop_at_non_finite
 from .registry import SOLVER_NAMES, solver_by_name
 from .step_control import StepControl
 from .term import MechanismState, MechanismTerm
@@ -34,4 +36,9 @@ __all__ = [
     "solver_by_name",
     "stabilised_accelerations",
     "state_norm",
+    "stop_at_non_finite",
+    "TrackExtremes",
+    "TrackedState",
+    "tracked_extremes",
+    "untracked",
 ]

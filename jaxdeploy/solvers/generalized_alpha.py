@@ -49,7 +49,7 @@ import jax.flatten_util
 import jax.numpy as jnp
 
 from ..mechanism.sparsity import compressed_jacobian
-from .term import MechanismState, MechanismTerm
+from .term import MechanismState, MechanismTerm, accelerations_at, mechanism_of
 
 
 class AlphaCoefficients(NamedTuple):
@@ -264,11 +264,33 @@ class StepSystem(NamedTuple):
         )
 
 
-def _mechanism_of(terms):
-    # diffeqsolve wraps terms (e.g. in a WrapTerm that handles the direction of time).
-    while not isinstance(terms, MechanismTerm):
-        terms = terms.term
-    return terms.mechanism
+class GeneralizedAlphaInterpolation(dfx.AbstractLocalInterpolation):
+    """Dense output of a generalized-α step: positions and velocities by the cubic Hermite
+    interpolant of the step's ends (slopes q̇ and q̈ there), memory linear, and the
+    accelerations and multipliers evaluated from the interpolated state with the step's
+    memory (`accelerations_at`: index-1, so they satisfy the acceleration constraint, which
+    the step's own q̈ = β' u does not, and carry none of its Newton error amplified by β'
+    ~ 1/h²). At a saved step end they therefore differ from the solver's q̈ by that error."""
+
+    t0: float
+    t1: float
+    hermite: dfx.ThirdOrderHermitePolynomialInterpolation
+    mechanism: object
+    memory: tuple
+
+    def __init__(self, *, t0, t1, y0, y1, k0, k1, mechanism, memory):
+        self.t0, self.t1 = t0, t1
+        self.hermite = dfx.ThirdOrderHermitePolynomialInterpolation(
+            t0=t0, t1=t1, y0=y0, y1=y1, k0=k0, k1=k1
+        )
+        self.mechanism, self.memory = mechanism, memory
+
+    def evaluate(self, t0, t1=None, left=True):
+        if t1 is not None:
+            return jax.tree.map(lambda b, a: b - a, self.evaluate(t1), self.evaluate(t0))
+        y = self.hermite.evaluate(t0)
+        qdd, lam = accelerations_at(self.mechanism, y.q, y.v, t0, self.memory)
+        return MechanismState(y.q, y.v, qdd, lam, y.memory)
 
 
 class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
@@ -323,7 +345,7 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
     estimate_error: bool = eqx.field(static=True, default=True)
 
     term_structure: ClassVar = MechanismTerm
-    interpolation_cls: ClassVar = dfx.ThirdOrderHermitePolynomialInterpolation
+    interpolation_cls: ClassVar = GeneralizedAlphaInterpolation
 
     def __check_init__(self):
         if self.newton not in ("modified", "full"):
@@ -347,7 +369,7 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
         return 3
 
     def init(self, terms, t0, t1, y0: MechanismState, args):
-        if _mechanism_of(terms).has_internal_state:
+        if mechanism_of(terms).has_internal_state:
             # Its second-order scheme has no stage for a first-order state ż = f(q, q̇, z).
             raise ValueError(
                 "solver='generalized_alpha' cannot integrate elements with continuous internal "
@@ -373,7 +395,7 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
         return terms.vf(t0, y0, args)
 
     def step(self, terms, t0, t1, y0: MechanismState, args, solver_state, made_jump):
-        mech = _mechanism_of(terms)
+        mech = mechanism_of(terms)
         cf = chung_hulbert(self.rho_inf)
         h = t1 - t0
         q0, v0, qdd0 = y0.q, y0.v, y0.qdd
@@ -489,7 +511,11 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
                 c["factors"][0],
                 c["factors"][1].astype(x0.dtype),
             )
-            return unravel(c["x"]), aux
+            # Newton's method proper met non-finite values (a NaN or overflowing force): the
+            # step has no solution to offer, and its last finite iterate would pass for one.
+            # NaN makes the failure visible to the step-size control (`simulate` stops a run
+            # whose steps cannot avoid it, with the time reached).
+            return unravel(jnp.where(c["ok"], c["x"], jnp.nan)), aux
 
         # Initial guess: q̈_{n+1} and λ_{n+1} extrapolated linearly from the last two steps
         # (u = q̈_{n+1}/β', μ = λ_{n+1}/β'); constant after a jump or before the first step.
@@ -561,7 +587,7 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
         )
         k0 = MechanismState(kq0, kv0, *secant)
         k1 = MechanismState(kq1, kv1, *secant)
-        dense_info = dict(y0=y0, y1=y1, k0=k0, k1=k1)
+        dense_info = dict(y0=y0, y1=y1, k0=k0, k1=k1, mechanism=mech, memory=memory)
         result = dfx.RESULTS.where(
             converged, dfx.RESULTS.successful, dfx.RESULTS.nonlinear_divergence
         )

@@ -26,6 +26,14 @@ class MechanismState(NamedTuple):
     memory: tuple
 
 
+def mechanism_of(terms) -> Mechanism:
+    """The `Mechanism` of a solver's `terms` (diffeqsolve wraps the term, e.g. in a `WrapTerm`
+    that handles the direction of time)."""
+    while not isinstance(terms, MechanismTerm):
+        terms = terms.term
+    return terms.mechanism
+
+
 class MechanismTerm(dfx.AbstractTerm):
     """A `Mechanism` as a diffrax term; `vf` is the index-1 time derivative of the state.
 
@@ -50,3 +58,11 @@ class MechanismTerm(dfx.AbstractTerm):
 
     def prod(self, vf, control):
         return jax.tree_util.tree_map(lambda x: x * control, vf)
+
+
+def accelerations_at(mechanism: Mechanism, q, v, t, memory, linear_solve="range_space"):
+    """`(q̈, λ)` of an output state `(q, q̇)` at time `t` from the equations of motion with the
+    memory of the step it lies in (`Mechanism.accelerations`, index-1, no stabilisation): the
+    saved accelerations and multipliers of every solver path are these, a function of the
+    saved state, rather than an interpolant between the step's ends."""
+    return mechanism.accelerations(q, v, t, memory, 0.0, linear_solve)
