@@ -12,7 +12,7 @@ def test_simulate_pendulum_writes_outputs(tmp_path):
     code = main(["simulate", "pendulum", "--t-end", "0.2", "--out", str(out), "--quiet"])
     assert code == 0
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["status"] == "ok" and summary["t_reached"] == 0.2
+    assert summary["status"] == "ok" and summary["t_reached_s"] == 0.2
     assert summary["n_steps"] > 0 and summary["wall_time_s"] > 0
     assert summary["params"]["length"] == 1.0
     assert "jax" in summary["versions"]

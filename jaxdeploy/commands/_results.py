@@ -17,7 +17,6 @@ SUMMARY_KEYS = (
     ("scene", "", "the scene's name"),
     ("t_end_s", "s", "end time of the run"),
     ("status", "", '"ok", or when and why the integration stopped'),
-    ("t_reached", "s", "time the integration reached (t_end unless it failed)"),
     ("t_reached_s", "s", "time the integration reached (t_end unless it failed)"),
     ("n_steps", "-", "accepted steps"),
     ("n_rejected", "-", "rejected steps (adaptive step control)"),
@@ -38,9 +37,10 @@ SUMMARY_KEYS = (
     # pendulum
     ("max_constraint_violation", "m", "largest absolute constraint residual Φ(q), saved states"),
     # slider_crank
-    ("slider_acc_min", "m/s²", "smallest slider acceleration"),
-    ("slider_acc_max", "m/s²", "largest slider acceleration"),
+    ("slider_acc_min", "m/s²", "smallest slider acceleration (every accepted step)"),
+    ("slider_acc_max", "m/s²", "largest slider acceleration (every accepted step)"),
     # clearance joints (slider_crank, deploy_array)
+    # Extremes tracked over every accepted step (not the saved states): docs/output_extremes.md
     ("max_contact_force", "N", "largest normal contact force of any clearance joint"),
     ("max_penetration", "m", "largest penetration of any clearance joint"),
     (rf"{PANEL}_max_contact_force", "N", "largest normal contact force of the panel's hinge"),

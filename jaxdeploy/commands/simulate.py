@@ -198,7 +198,7 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
         "t_end_s": t_end,
         "status": trajectory.status(),
         # Where the integration stopped: t_end, or the failure's time (not the last save).
-        "t_reached": trajectory.time_reached(),
+        "t_reached_s": trajectory.time_reached(),
         "n_steps": int(trajectory.stats["num_accepted_steps"]),
         "n_rejected": int(trajectory.stats["num_rejected_steps"]),
         # Newton iterations exist only for generalized-α; null for the explicit diffrax path.
