@@ -30,10 +30,11 @@ It is an instrument: it adds three coordinates whose error estimate is zero, whi
 RMS error norm by sqrt(n/(n+3)) — say so when reporting steps taken with it.
 
 **Extremes.** The largest contact force of an impact lasts microseconds, far less than the
-spacing of any saved grid, so a maximum taken over saved states depends on the grid (3.3× on
-deploy_array between 2001 and 20001 saved states). `extremes_at` gives, at one state, the
-quantities a summary reports as extremes; the solvers fold them over every accepted step
-(`jaxdeploy.solvers.TrackExtremes`), so the run's extremes do not depend on the output times.
+spacing of any saved grid, so a maximum taken over saved states depends on the grid (on
+deploy_array, 501 saved states saw 27 % of the largest contact force, 20001 saw 96 %).
+`extremes_at` gives, at one state, the quantities a summary reports as extremes; the solvers
+fold them over every accepted step (`jaxdeploy.solvers.TrackExtremes`), so the run's extremes
+do not depend on the output times.
 
 Reference: the work–energy theorem for constrained systems, e.g. Géradin & Cardona, *Flexible
 Multibody Dynamics* (2001), §6.

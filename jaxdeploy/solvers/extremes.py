@@ -2,24 +2,25 @@
 acceleration extremes) folded over every accepted step, whatever the output times.
 
 A maximum over saved states is a maximum over the output grid: an impact's force peak lasts
-tens of microseconds and falls between saved times (deploy_array, default run: the largest
-contact force over 501 saved states was 3669 N, over 20001 13239 N). The wrapper evaluates
+tens of microseconds and falls between saved times (deploy_array, default run: 501 saved
+states saw 27 % of the largest contact force, 20001 saved states 96 %; docs/
+output_extremes.md). The wrapper evaluates
 `jaxdeploy.mechanism.extremes_at` at the end of every step the solver takes and folds it into
 its state; diffrax keeps the previous solver state for a rejected step, so only accepted steps
 count, and the result is the same for every choice of output times.
 
 A step end can miss a peak inside the step. For a peak of duration T (F ≈ F_max (1 − c (t −
 t_p)²/T²) near it, c ≈ 7 for a Hertz pulse) sampled every h the miss is up to c h²/(4 T²): a
-long explicit step in an impact matters. Measured at the default tolerances, step ends alone
-against 4 interior samples per step (`experiments/extremes_sampling.py`): slider_crank with
-generalized-α (its default) 4e-5; deploy_array with Tsit5 (its default) ≤ 1e-6 in contact
-force and 1.7e-3 in a panel's acceleration; slider_crank with Tsit5 7.5e-3 in both. So each
-step's midpoint is sampled too (`samples = 1`), on the step's dense output: the contact
-quantities at the interpolated state, and the accelerations as the time derivative of the
-interpolated velocity — on slider_crank (Tsit5) the extreme found so differed by 6e-6 from
-the one found by solving the equations of motion at the midpoint, which costs four times as
-much (XLA's operation count for a deploy_array step: +7 % for the midpoint sample, +29 % with
-an acceleration solve). With it the Tsit5 slider_crank misses fall below 1e-4.
+long explicit step in an impact matters. Measured at the default tolerances against 4
+interior samples per step (docs/output_extremes.md, `experiments/extremes_sampling.py`): step
+ends alone miss up to 1e-4 (slider_crank, generalized-α: its default), 5.5e-3 (deploy_array,
+Tsit5: its default; a panel's acceleration) and 2.6e-3 (slider_crank with Tsit5). So each
+step's midpoint is sampled too (`samples = 1`; misses 4e-6, 1.4e-3, 2.6e-3), on the step's
+dense output: the contact quantities at the interpolated state, and the accelerations as the
+time derivative of the interpolated velocity — on slider_crank (Tsit5) the extreme found so
+differed by 6e-6 from the one found by solving the equations of motion at the midpoint, which
+costs four times as much (XLA's operation count for a deploy_array step: +7 % for the
+midpoint sample, +29 % with an acceleration solve).
 
 The accelerations at a step's end are the solver's own (`y1.qdd`): for the index-1 path the
 equations of motion at that state; for generalized-α its q̈ = β' u, which differs from them
