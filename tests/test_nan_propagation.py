@@ -98,6 +98,19 @@ def test_friction_laws_give_nan_when_any_input_is_nan(cls):
     assert np.isnan(float(law.force(0.0, NAN)))
 
 
+def test_lugre_friction_gives_nan_when_any_input_is_nan():
+    """LuGre (a law with its own state z, not an `AbstractFrictionLaw`)."""
+    law = contact.LuGreFriction()
+    args = (0.01, 1e-7, 10.0)  # v [m/s], z [m], F_N [N]
+    for method in (law.force, law.rate):
+        assert np.isfinite(float(method(*args)))
+        for k in range(3):
+            broken = list(args)
+            broken[k] = NAN
+            assert np.isnan(float(method(*broken))), (method.__name__, k)
+    assert np.isnan(float(law.force(0.0, 1e-7, NAN)))  # at rest too
+
+
 def test_gaussian_moments_give_nan_at_nan():
     h = jnp.array([-20.0, 0.5, 70.0, NAN])
     for n in (0.0, 1.0, 1.5, 2.5):
