@@ -15,9 +15,9 @@ import os
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _docblocks import replace_block
 
 from jaxdeploy import contact
+from jaxdeploy.io import replace_block
 from jaxdeploy.mechanism import Body, Mechanism, RevoluteClearance
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -31,10 +31,8 @@ import os
 import time
 
 import numpy as np
-from _docblocks import replace_block
 
-from jaxdeploy.benchmarks.report import machine_description
-from jaxdeploy.io import atomic_write_json, run_metadata
+from jaxdeploy.io import atomic_write_json, machine_description, replace_block, run_metadata
 from jaxdeploy.mechanism import RevoluteClearance, energy_balance, energy_moved, metered
 from jaxdeploy.scenes import DeployArray
 from jaxdeploy.simulation import simulate

@@ -31,9 +31,13 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from _docblocks import replace_block  # noqa: E402
 
-from jaxdeploy.io import atomic_write_bytes, code_revision, run_metadata  # noqa: E402
+from jaxdeploy.io import (  # noqa: E402
+    atomic_write_bytes,
+    code_revision,
+    replace_block,  # noqa: E402
+    run_metadata,
+)
 from jaxdeploy.scenes import DeployArray  # noqa: E402
 from jaxdeploy.scenes.deploy_array import deployment_angle  # noqa: E402
 from jaxdeploy.simulation import simulate  # noqa: E402

@@ -31,10 +31,13 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from _docblocks import replace_block  # noqa: E402
 
 from jaxdeploy.analysis.spectra import amplitude_spectrum  # noqa: E402
-from jaxdeploy.io import atomic_savefig, code_revision  # noqa: E402
+from jaxdeploy.io import (  # noqa: E402
+    atomic_savefig,
+    code_revision,
+    replace_block,  # noqa: E402
+)
 from jaxdeploy.scenes import DeployArray  # noqa: E402
 from jaxdeploy.simulation import simulate  # noqa: E402
 

@@ -16,11 +16,11 @@ from __future__ import annotations
 import os
 
 import numpy as np
-from _docblocks import replace_block
 
 from jaxdeploy.benchmarks.peers import SliderCrankNumpy
 from jaxdeploy.benchmarks.reference import WINDOW, eccentricity_error
 from jaxdeploy.benchmarks.report import machine_description
+from jaxdeploy.io import replace_block
 from jaxdeploy.scenes import SliderCrank
 from jaxdeploy.simulation import simulate
 

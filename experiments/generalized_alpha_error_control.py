@@ -21,11 +21,10 @@ import os
 import time
 
 import numpy as np
-from _docblocks import replace_block
 
 from jaxdeploy.benchmarks.peers import SliderCrankNumpy
 from jaxdeploy.benchmarks.reference import WINDOW, eccentricity_error
-from jaxdeploy.benchmarks.report import machine_description
+from jaxdeploy.io import machine_description, replace_block
 from jaxdeploy.scenes import DeployArray, SliderCrank
 from jaxdeploy.simulation import simulate
 

@@ -30,10 +30,9 @@ import diffrax as dfx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from _docblocks import replace_block
 
 from jaxdeploy.batch import run_scene
-from jaxdeploy.io import atomic_write_json, run_metadata
+from jaxdeploy.io import atomic_write_json, replace_block, run_metadata
 from jaxdeploy.scenes import DeployArray
 
 # The solver this experiment's page was generated with (pinned: deploy_array's default is

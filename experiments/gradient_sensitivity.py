@@ -31,7 +31,8 @@ import jax
 import jax.numpy as jnp
 import matplotlib
 import numpy as np
-from _docblocks import replace_block
+
+from jaxdeploy.io import replace_block
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402

@@ -36,11 +36,10 @@ import sys
 import time
 
 import numpy as np
-from _docblocks import replace_block
 
 from jaxdeploy.cli import main as cli
 from jaxdeploy.fit import load_measurements, synthesize
-from jaxdeploy.io import atomic_write_json, run_metadata
+from jaxdeploy.io import atomic_write_json, replace_block, run_metadata
 from jaxdeploy.scenes import DeployArray
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -30,10 +30,9 @@ import os
 import subprocess
 import sys
 
-from _docblocks import replace_block
-
 from jaxdeploy.cli import main as cli
 from jaxdeploy.fit._schedule import RTOL_FLOOR
+from jaxdeploy.io import replace_block
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join("docs", "figures", "identification_independent")

@@ -23,12 +23,11 @@ import os
 import time
 
 import numpy as np
-from _docblocks import replace_block
 
 from jaxdeploy.batch import simulate_batch
 from jaxdeploy.fit import Measurements, ResidualSpec, load_measurements
 from jaxdeploy.fit._residuals import Comparison
-from jaxdeploy.io import atomic_write_json, run_metadata
+from jaxdeploy.io import atomic_write_json, replace_block, run_metadata
 from jaxdeploy.scenes import DeployArray
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -19,7 +19,8 @@ import sys
 import time
 
 import numpy as np
-from _docblocks import replace_block
+
+from jaxdeploy.io import replace_block
 
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, os.path.join(ROOT, "tests"))
@@ -38,7 +39,7 @@ from independent.package_runs import (  # noqa: E402
 )
 from independent.slider_crank_minimal import SliderCrankMinimal  # noqa: E402
 
-from jaxdeploy.benchmarks.report import machine_description  # noqa: E402
+from jaxdeploy.io import machine_description  # noqa: E402
 from jaxdeploy.mechanism import RevoluteClearance  # noqa: E402
 
 DOC = os.path.join(ROOT, "docs", "verification.md")

@@ -38,8 +38,13 @@ from jaxdeploy.analysis.spectra import (
     peak_frequency,
     welch_psd,
 )
-from jaxdeploy.benchmarks.report import machine_description
-from jaxdeploy.io import atomic_write_bytes, atomic_write_json, atomic_write_npz, run_metadata
+from jaxdeploy.io import (
+    atomic_write_bytes,
+    atomic_write_json,
+    atomic_write_npz,
+    machine_description,
+    run_metadata,
+)
 from jaxdeploy.scenes import DeployArray
 from jaxdeploy.scenes.deploy_array import GEOMETRY, deployment_angle
 from jaxdeploy.simulation import simulate

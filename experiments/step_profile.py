@@ -346,7 +346,7 @@ def main(argv=None):
         )
     if not args.no_doc:
         sys.path.insert(0, HERE)
-        from _docblocks import replace_block
+        from jaxdeploy.io import replace_block
 
         replace_block(DOC, "step_profile", text)
     return rows

@@ -169,6 +169,53 @@ def run_metadata() -> dict:
     }
 
 
+def machine_description() -> dict:
+    """CPU model, core count and load average at the time of the call (lscpu when
+    available): beside every timing, so that a reader knows what the seconds were measured on
+    and how loaded the machine was."""
+    info = {"platform": platform.platform(), "python": platform.python_version()}
+    try:
+        lscpu = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
+        wanted = ("Model name", "CPU(s)", "Thread(s) per core", "L2 cache", "L3 cache")
+        for line in lscpu.splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() in wanted:
+                info[key.strip()] = value.strip()
+    except (OSError, subprocess.SubprocessError):
+        pass
+    info["load_average_1_5_15min"] = os.getloadavg()
+    return info
+
+
+def revision_label(revision: dict | None = None) -> str:
+    """`commit abc1234567` (with `, uncommitted changes` when dirty) for a page or table that
+    says which code made its numbers; `revision` as `code_revision` returns it (default: now)."""
+    revision = code_revision() if revision is None else revision
+    if not revision:
+        return "a copy not in git"
+    dirty = " (uncommitted changes)" if revision["dirty"] else ""
+    return f"commit {revision['commit'][:10]}{dirty}"
+
+
+def replace_block(path: str, name: str, text: str) -> None:
+    """Replace the generated block `<!-- BEGIN name -->` … `<!-- END name -->` of the page at
+    `path` with `text` (appended when the page has no such block; the page is created when
+    missing), written atomically: the prose around it stays hand-written, the numbers inside
+    come from the script that owns the block."""
+    begin, end = f"<!-- BEGIN {name} -->", f"<!-- END {name} -->"
+    page = ""
+    if os.path.exists(path):
+        with open(path, encoding="utf-8") as fh:
+            page = fh.read()
+    block = f"{begin}\n{text.rstrip()}\n{end}"
+    if begin in page and end in page:
+        head, rest = page.split(begin, 1)
+        page = head + block + rest.split(end, 1)[1]
+    else:
+        page = page.rstrip() + "\n\n" + block + "\n"
+    atomic_write_bytes(path, page.encode("utf-8"))
+
+
 def check_output_dir(path: str, overwrite: bool) -> None:
     """Refuse (`FileExistsError`) a non-empty existing folder unless `overwrite`; a file in
     the way (the path itself or any folder above it) is refused too, and so is a path that

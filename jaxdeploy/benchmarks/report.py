@@ -5,34 +5,11 @@ from __future__ import annotations
 import csv
 import io
 import os
-import platform
-import subprocess
 
 import numpy as np
 
-from ..io import atomic_write_bytes, atomic_write_json, run_metadata
+from ..io import atomic_write_bytes, atomic_write_json, machine_description, run_metadata
 from .work_precision import Row, rows_as_dicts
-
-
-def machine_description() -> dict:
-    """CPU model, core count and load at the time of the run (lscpu when available)."""
-    info = {"platform": platform.platform(), "python": platform.python_version()}
-    try:
-        lscpu = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
-        for line in lscpu.splitlines():
-            key, _, value = line.partition(":")
-            if key.strip() in (
-                "Model name",
-                "CPU(s)",
-                "Thread(s) per core",
-                "L2 cache",
-                "L3 cache",
-            ):
-                info[key.strip()] = value.strip()
-    except (OSError, subprocess.SubprocessError):
-        pass
-    info["load_average_1_5_15min"] = os.getloadavg()
-    return info
 
 
 def markdown_table(rows: list[Row]) -> str:
