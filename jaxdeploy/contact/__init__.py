@@ -36,11 +36,13 @@ from .gaussian_moments import (
     positive_power,
 )
 from .roughness import (
+    PloughingFriction,
     RestitutionRoughnessCoupling,
-    RoughnessCoupling,
     combine_sigma,
     ra_to_sigma,
     sigma_to_ra,
+    turned_feed,
+    turned_profile_slope,
 )
 from .stiffness import (
     effective_modulus,
@@ -72,11 +74,13 @@ __all__ = [
     "gaussian_moment",
     "gaussian_smoothed_power",
     "positive_power",
+    "PloughingFriction",
     "RestitutionRoughnessCoupling",
-    "RoughnessCoupling",
     "combine_sigma",
     "ra_to_sigma",
     "sigma_to_ra",
+    "turned_feed",
+    "turned_profile_slope",
     "effective_modulus",
     "effective_radius",
     "journal_bearing_stiffness",

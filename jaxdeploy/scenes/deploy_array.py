@@ -47,7 +47,7 @@ from ._contact import (
     check_contact_options,
     clearance_contact_laws,
 )
-from .base import OptionSpec, ParamSpec, Scene
+from .base import OptionSpec, ParamSpec, Scene, is_exactly_zero
 
 # The classical (literature) rule: docs/deploy_array.md ("Impact-velocity rule") measures both
 # rules on this scene; onset does not fail there (no contact begins at rest, same lock time and
@@ -70,6 +70,12 @@ LATCH_PRELOAD_PARAMS = (
     "latch_preload_arm",
     "panel_latch_preload",
 )
+
+# How a hinge's friction depends on its roughness (docs/contact.md, "Roughness couplings"):
+# "constant" uses friction_coefficient for every Ra; "ploughing" is adhesion plus Bowden–Tabor
+# ploughing by the asperities of a turned surface (`contact.PloughingFriction`).
+FRICTION_ROUGHNESS_MODELS = ("constant", "ploughing")
+PLOUGHING_PARAMS = ("friction_adhesion", "tool_nose_radius")
 
 INF = math.inf
 
@@ -130,6 +136,26 @@ def _shared_params() -> dict[str, ParamSpec]:
         ),
         "restitution": ParamSpec(0.9, 0, 1, "", "coefficient of restitution c_e", False),
         "friction_coefficient": ParamSpec(0.05, 0, 2, "", "friction μ (0: none traced)"),
+        # friction_roughness="ploughing" only: μ(Ra) = μ_a + (2/π) Δa(Ra; r_ε). The defaults
+        # give μ = 0.050 at Ra 1.6 µm, the constant model's value (μ_a is the free part).
+        "friction_adhesion": ParamSpec(
+            0.01, 0, 2, "", "adhesion part μ_a of the ploughing friction law"
+        ),
+        "tool_nose_radius": ParamSpec(
+            0.8e-3, 1e-5, 1e-2, "m", "nose radius r_ε of the tool that turned the hinge"
+        ),
+        # c_e(Ra) = c_e^((Ra/Ra_ref)^p): no published relation (docs/contact.md); p = 0: off.
+        "restitution_roughness_exponent": ParamSpec(
+            0.0, -4, 4, "", "exponent p of the free restitution-roughness coupling (0: none)"
+        ),
+        "restitution_reference_ra": ParamSpec(
+            1.6e-6,
+            1e-8,
+            1e-4,
+            "m",
+            "Ra at which the coupled restitution equals `restitution`",
+            False,
+        ),
         "roughness_offset": ParamSpec(0.0, 0, 6, "σ", "clearance reference offset s0"),
         "pin_radius": ParamSpec(
             g["contact_defaults"]["pin_radius"], 0, INF, "m", "hinge pin radius R_j", False
@@ -153,6 +179,9 @@ class DeployArray(Scene):
       one side of its clearance with `latch_preload`, and a panel latch presses the panel
       hinge J7 with `panel_latch_preload`) or `"angle_only"` (one latch holds the angle
       alone; the journals are free in their clearances after the lock).
+    - `friction_roughness`: `"constant"` (default: `friction_coefficient` at every Ra) or
+      `"ploughing"` (each hinge's μ from its Ra, `contact.PloughingFriction` with
+      `friction_adhesion` and `tool_nose_radius`).
     """
 
     name = "deploy_array"
@@ -174,6 +203,12 @@ class DeployArray(Scene):
         "normal_law": NORMAL_LAW_OPTION,
         "impact_velocity_rule": IMPACT_VELOCITY_RULE_OPTION,
         "friction_shape": FRICTION_SHAPE_OPTION,
+        "friction_roughness": OptionSpec(
+            "constant",
+            FRICTION_ROUGHNESS_MODELS,
+            "hinge friction vs roughness: constant (friction_coefficient) or ploughing "
+            "(adhesion + ploughing of a turned surface, from each hinge's Ra)",
+        ),
         "latch": OptionSpec(
             DEFAULT_LATCH,
             LATCH_MODELS,
@@ -190,8 +225,14 @@ class DeployArray(Scene):
         impact_velocity_rule: str = DEFAULT_IMPACT_VELOCITY_RULE,
         friction_shape: str = "algebraic",
         latch: str = DEFAULT_LATCH,
+        friction_roughness: str = "constant",
     ):
         check_contact_options(normal_law, impact_velocity_rule, friction_shape)
+        if friction_roughness not in FRICTION_ROUGHNESS_MODELS:
+            raise ValueError(
+                f"friction_roughness = {friction_roughness!r} is invalid; valid: "
+                f"{', '.join(FRICTION_ROUGHNESS_MODELS)}"
+            )
         if latch not in LATCH_MODELS:
             raise ValueError(f"latch = {latch!r} is invalid; valid: {', '.join(LATCH_MODELS)}")
         joints = DEFAULT_CLEARANCE_JOINTS if clearance_joints is None else clearance_joints
@@ -206,6 +247,7 @@ class DeployArray(Scene):
         self.impact_velocity_rule = impact_velocity_rule
         self.friction_shape = friction_shape
         self.latch = latch
+        self.friction_roughness = friction_roughness
         params = _shared_params()
         ra = GEOMETRY["contact_defaults"]["Ra"]
         c = GEOMETRY["contact_defaults"]["clearance"]
@@ -225,12 +267,17 @@ class DeployArray(Scene):
             "impact_velocity_rule": self.impact_velocity_rule,
             "friction_shape": self.friction_shape,
             "latch": self.latch,
+            "friction_roughness": self.friction_roughness,
         }
 
     def ignored_params(self) -> dict[str, str]:
         out = {}
         if self.latch == "angle_only":
             out.update(dict.fromkeys(LATCH_PRELOAD_PARAMS, "latch=preloaded"))
+        if self.friction_roughness == "ploughing":
+            out["friction_coefficient"] = "friction_roughness=constant"
+        else:
+            out.update(dict.fromkeys(PLOUGHING_PARAMS, "friction_roughness=ploughing"))
         if self.ideal:
             used_by_contact = (*CONTACT_PARAMS, "pin_radius", "roughness_offset")
             out.update({n: "ideal=false" for n in self.params if n in used_by_contact})
@@ -255,14 +302,25 @@ class DeployArray(Scene):
                 elements.append(Revolute(*ends))
                 continue
             clearance = p[f"{owner}_clearance"]
+            ra = p[f"{owner}_ra"]
+            friction_coefficient = p["friction_coefficient"]
+            if self.friction_roughness == "ploughing":
+                friction_coefficient = contact.PloughingFriction(
+                    p["friction_adhesion"], p["tool_nose_radius"]
+                )(ra)
+            restitution = p["restitution"]
+            if not is_exactly_zero(p["restitution_roughness_exponent"]):
+                restitution = contact.RestitutionRoughnessCoupling(
+                    p["restitution_reference_ra"], p["restitution_roughness_exponent"]
+                )(restitution, ra)
             normal, friction = clearance_contact_laws(
                 journal_radius=p["pin_radius"],
                 clearance=clearance,
                 youngs_modulus=p["youngs_modulus"],
                 poisson_ratio=p["poisson_ratio"],
-                sigma=contact.ra_to_sigma(p[f"{owner}_ra"]),
-                restitution=p["restitution"],
-                friction_coefficient=p["friction_coefficient"],
+                sigma=contact.ra_to_sigma(ra),
+                restitution=restitution,
+                friction_coefficient=friction_coefficient,
                 normal_law=self.normal_law,
                 roughness_offset=p["roughness_offset"],
                 slip_velocity=p["friction_slip_velocity"],
