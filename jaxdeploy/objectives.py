@@ -20,8 +20,8 @@ Features (all pure JAX in the channels; `ts` and the windows are concrete):
 * `decay_rate`: λ = −b [1/s].
 * `settling_time`: Σ_k |W_k| σ((ln r_k − ln ε)/s), the time the envelope spends above ε [s].
 * `peak_vibration`: (mean_k r_k^p)^{1/p} = exp((LSE_k(p ln r_k) − ln K)/p), a smoothed max.
-* `dominant_frequency`: Σ_j f_j softmax_j(β ln P_j), P the Hann-windowed power spectrum of e
-  after t_L [Hz].
+* `dominant_frequency`: Σ_j f_j softmax_j(β ln P_j), P the Welch spectrum of e after t_L
+  (accelerations: interval means from the velocities) [Hz].
 * `deployment_deviation`: sqrt(mean_{t ≤ t_L} ‖e(t)‖²).
 * `peak_contact_force`: (mean_i F_i^p)^{1/p} over saved samples of a joint's normal force [N].
 
@@ -41,7 +41,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-SIGNALS = ("displacement", "acceleration", "angle")
+from .analysis.deploy_array import SPECTRUM_SEGMENT
+from .analysis.spectra import interval_mean_rate, welch_psd
+
+SIGNALS = ("displacement", "velocity", "acceleration", "angle")
 PANELS = ("panel1", "panel2")
 
 
@@ -66,10 +69,13 @@ class Deployment:
         return value if self.ideal is None else value - self.ideal[name]
 
     def signal(self, panel: str, kind: str):
-        """Deviation of a panel signal, `(N, d)`: `displacement` (tip x, y) [m],
-        `acceleration` (tip x, y) [m/s²], or `angle` (deployment angle α, d = 1) [rad]."""
+        """Deviation of a panel signal, `(N, d)`: `displacement` (tip x, y) [m], `velocity`
+        (tip x, y) [m/s], `acceleration` (tip x, y) [m/s²], or `angle` (deployment angle α,
+        d = 1) [rad]."""
         if kind == "displacement":
             names = (f"{panel}_tip_x", f"{panel}_tip_y")
+        elif kind == "velocity":
+            names = (f"{panel}_tip_vx", f"{panel}_tip_vy")
         elif kind == "acceleration":
             names = (f"{panel}_tip_ax", f"{panel}_tip_ay")
         elif kind == "angle":
@@ -183,28 +189,36 @@ def dominant_frequency(
     *,
     delay=0.005,
     duration=None,
+    segment=SPECTRUM_SEGMENT,
     sharpness=4.0,
     f_min=5.0,
 ):
-    """Dominant frequency [Hz] of the post-lock deviation, a soft argmax of its spectrum:
+    """Dominant frequency [Hz] of the post-lock deviation, a soft argmax of its Welch spectrum:
 
-    f_dom = Σ_j f_j softmax_j(β ln P_j),  P_j = Σ_d |DFT(h · (e_d − ē_d))_j|²,
+    f_dom = Σ_j f_j softmax_j(β ln P_j),  P_j = Σ_d Welch-PSD_j(e_d),
 
-    h the Hann window over [t_L + δ, t_L + δ + duration] (default: to the end), β =
-    `sharpness`, frequencies below `f_min` excluded. β ln P = ln P^β: the weights are P_j^β
-    normalised, so the estimate is dominated by the highest peak and moves smoothly with it.
+    over [t_L + δ, t_L + δ + duration] (default: to the end), β = `sharpness`, frequencies
+    below `f_min` excluded. β ln P = ln P^β: the weights are P_j^β normalised, so the estimate
+    is dominated by the highest peak and moves smoothly with it.
+
+    The spectrum is the one docs/spectral_peak.md settled on (`analysis.spectra`): Welch's
+    average over half-overlapping Hann segments of `segment` seconds (0.1 s: 10 Hz resolution,
+    about the latch mode's bandwidth; a whole-record periodogram resolves the chaotic
+    interference of single rattle impacts instead), and for `signal="acceleration"` the
+    interval-mean acceleration (v_{k+1} − v_k)/Δt from the saved tip velocity deviation, which
+    counts every impact between samples instead of aliasing the point-sampled one.
     """
     ts = np.asarray(dep.ts)
     start = int(np.searchsorted(ts, dep.lock_time + delay))
     stop = len(ts) if duration is None else int(np.searchsorted(ts, ts[start] + duration))
     if stop - start < 16:
         raise ValueError("dominant_frequency: fewer than 16 samples after lock")
-    e = dep.signal(panel, signal)[start:stop]
-    e = e - e.mean(axis=0)
-    h = np.hanning(stop - start)[:, None]
-    spectrum = jnp.fft.rfft(h * e, axis=0)
-    power = jnp.sum(jnp.real(spectrum) ** 2 + jnp.imag(spectrum) ** 2, axis=-1)
-    f = np.fft.rfftfreq(stop - start, d=float(ts[1] - ts[0]))
+    if signal == "acceleration":
+        t, e = interval_mean_rate(ts[start:stop], dep.signal(panel, "velocity")[start:stop])
+    else:
+        t, e = ts[start:stop], dep.signal(panel, signal)[start:stop]
+    f, psd = welch_psd(t, e, segment)
+    power = jnp.sum(psd, axis=-1)
     keep = f >= f_min
     logp = jnp.log(power[keep] + 1e-300)
     weights = jax.nn.softmax(sharpness * (logp - jax.lax.stop_gradient(logp.max())))

@@ -16,13 +16,26 @@ LOCK = 0.3
 
 def _deployment(decay=12.0, freq=100.0, amp=1e-3, offset=2e-4, force=None):
     """Panel 1's tip x deviation: `offset` before the lock, amp e^{−λ(t − t_L)} sin(2π f t)
-    after; tip y deviation zero. Acceleration channels carry the same signal."""
+    after; tip y deviation zero. Acceleration channels carry the same signal, velocity
+    channels its integral (so the interval-mean acceleration is this signal again)."""
     t = jnp.asarray(TS)
     after = t > LOCK
     ringing = amp * jnp.exp(-decay * (t - LOCK)) * jnp.sin(2 * jnp.pi * freq * t)
     e = jnp.where(after, ringing, offset)
     zero = jnp.zeros_like(t)
+    w = 2 * jnp.pi * freq
+    # ∫ A e^{−λs} sin(ω t) dt with s = t − t_L, from t_L on (0 before).
+    integral = (
+        amp
+        * (
+            jnp.exp(-decay * (t - LOCK)) * (-decay * jnp.sin(w * t) - w * jnp.cos(w * t))
+            - (-decay * jnp.sin(w * LOCK) - w * jnp.cos(w * LOCK))
+        )
+        / (decay**2 + w**2)
+    )
     channels = {
+        "panel1_tip_vx": jnp.where(after, integral, 0.0),
+        "panel1_tip_vy": zero,
         "alpha": zero,
         "panel1_tip_x": e,
         "panel1_tip_y": zero,
@@ -39,8 +52,12 @@ def test_decay_rate_frequency_and_deployment_deviation_recover_known_values():
     # 20 ms windows hold two periods: r_k = A e^{−λ t_k} × const, so the fit is exact up to
     # the envelope's curvature within a window (O((λw)²) = O(0.06)) — checked to 1 %.
     assert float(ob.decay_rate(dep, "panel1", "displacement")) == pytest.approx(12.0, rel=1e-2)
-    # The spectral peak of a decaying 100 Hz sine (resolution 1/0.7 s ≈ 1.4 Hz).
+    # The spectral peak of a decaying 100 Hz sine (Welch, 0.1 s segments: bins 10 Hz apart,
+    # the soft argmax weighs the bins around the peak symmetrically).
     f = float(ob.dominant_frequency(dep, "panel1", "displacement"))
+    assert f == pytest.approx(100.0, abs=1.5)
+    # Acceleration: interval means from the tip velocities, the same sine.
+    f = float(ob.dominant_frequency(dep, "panel1", "acceleration"))
     assert f == pytest.approx(100.0, abs=1.5)
     assert float(ob.deployment_deviation(dep, "panel1")) == pytest.approx(2e-4, rel=1e-12)
     # log_decay is the fitted log-ratio over the span of window centres.
@@ -90,6 +107,7 @@ def test_peak_contact_force_smoothed_max():
         (ob.decay_rate, {"signal": "displacement"}),
         (ob.log_decay, {"signal": "displacement"}),
         (ob.dominant_frequency, {"signal": "displacement"}),
+        (ob.dominant_frequency, {"signal": "acceleration"}),
         (ob.peak_vibration, {"signal": "displacement"}),
         (ob.settling_time, {"signal": "displacement", "threshold": 1e-4}),
         (ob.deployment_deviation, {}),
@@ -140,6 +158,6 @@ def test_objective_composition_and_parsing():
     with pytest.raises(ValueError, match="not a number"):
         ob.parse_objective("panel1:log_decay=abc")
     with pytest.raises(ValueError, match="signal"):
-        ob.peak_vibration(dep, "panel1", signal="velocity")
+        ob.peak_vibration(dep, "panel1", signal="jerk")
     with pytest.raises(ValueError, match="fewer than 2 whole windows"):
         ob.decay_rate(dep, "panel1", window=0.5)

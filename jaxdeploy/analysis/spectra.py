@@ -23,6 +23,8 @@ of a ~10 Hz-wide resonance. Together they made the reported peak 85 Hz with one 
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 
@@ -42,17 +44,23 @@ def amplitude_spectrum(t, x):
     return np.fft.rfftfreq(len(x), dt), amplitude
 
 
+def _array_module(x):
+    """jax.numpy for JAX arrays (traced or not: the spectra then differentiate), else numpy."""
+    return jnp if isinstance(x, jax.Array) else np
+
+
 def interval_mean_rate(t, x):
     """Mean rate of change of `x` over each interval of the samples:
 
     r_k = (x_{k+1} − x_k) / (t_{k+1} − t_k) = (1/Δt) ∫_{t_k}^{t_{k+1}} ẋ dt,
 
     for an acceleration from saved velocities. **Returns:** `(t_k, r_k)` (interval start
-    times; `len(t) − 1` values; `x` may have trailing axes).
+    times; `len(t) − 1` values; `x` may have trailing axes; a JAX `x` gives a JAX `r_k`).
     """
-    t, x = np.asarray(t, dtype=float), np.asarray(x, dtype=float)
+    xp = _array_module(x)
+    t, x = np.asarray(t, dtype=float), xp.asarray(x, dtype=float)
     dt = np.diff(t).reshape((-1,) + (1,) * (x.ndim - 1))
-    return t[:-1], np.diff(x, axis=0) / dt
+    return t[:-1], xp.diff(x, axis=0) / dt
 
 
 def welch_psd(t, x, segment):
@@ -62,20 +70,25 @@ def welch_psd(t, x, segment):
     (w), and the periodograms 2 |DFT(w x)|² / (f_s Σ w²) are averaged. A record shorter than
     one segment is one segment.
 
-    **Returns:** `(frequencies [Hz], psd [x² / Hz])`; the frequency resolution is 1/`segment`.
+    **Arguments:** `t` concrete sample times; `x` `(N,)` or `(N, ...)` (trailing axes are
+    spectra of their own); numpy, or a JAX array (possibly traced: the PSD differentiates).
+
+    **Returns:** `(frequencies [Hz], psd [x² / Hz])`, psd `(F, ...)`; the frequency resolution
+    is 1/`segment`.
     """
-    t, x = np.asarray(t, dtype=float), np.asarray(x, dtype=float)
     if not segment > 0:
         raise ValueError(f"segment = {segment!r} is invalid: it must be > 0 s")
+    xp = _array_module(x)
+    t, x = np.asarray(t, dtype=float), xp.asarray(x, dtype=float)
     dt = float(np.mean(np.diff(t)))
     n = min(len(x), max(8, int(round(segment / dt))))
-    step = max(1, n // 2)
+    starts = np.arange(0, len(x) - n + 1, max(1, n // 2))
+    segments = x[starts[:, None] + np.arange(n)]  # (S, n, ...)
+    segments = segments - segments.mean(axis=1, keepdims=True)
     window = np.hanning(n)
-    starts = range(0, len(x) - n + 1, step)
-    power = np.zeros(n // 2 + 1)
-    for s in starts:
-        y = x[s : s + n]
-        power += np.abs(np.fft.rfft((y - y.mean()) * window)) ** 2
+    spectra = xp.fft.rfft(segments * window.reshape((1, n) + (1,) * (x.ndim - 1)), axis=1)
+    # |z|² as re² + im²: differentiable where a bin is exactly 0, unlike abs.
+    power = xp.sum(xp.real(spectra) ** 2 + xp.imag(spectra) ** 2, axis=0)
     psd = 2.0 * power / (len(starts) * np.sum(window**2) / dt)
     return np.fft.rfftfreq(n, dt), psd
 

@@ -410,11 +410,13 @@ class DeployArray(Scene):
 
     def channels(self, mechanism, trajectory):
         """Base channels plus `alpha` (deployment angle, rad); each panel's tip position
-        `{panel}_tip_x/_y` and acceleration `{panel}_tip_ax/_ay`; and per clearance joint
+        `{panel}_tip_x/_y`, velocity `{panel}_tip_vx/_vy` and acceleration
+        `{panel}_tip_ax/_ay`; and per clearance joint
         (named by owner) `{owner}_normal_force` [N] and `{owner}_penetration` [m].
 
-        Tip acceleration of a point s fixed in a body (Nikravesh 1988, eq. 4.12):
-        a_P = r̈ + θ̈ A′s − θ̇² A s, with A the rotation matrix and A′s = perp(A s).
+        Velocity and acceleration of a point s fixed in a body (Nikravesh 1988, eq. 4.12):
+        v_P = ṙ + θ̇ A′s, a_P = r̈ + θ̈ A′s − θ̇² A s, with A the rotation matrix and
+        A′s = perp(A s).
         """
         from ..analysis.contact_forces import clearance_joint_history
 
@@ -430,6 +432,8 @@ class DeployArray(Scene):
             arm_y = s * tip[0] + c * tip[1]
             out[f"{panel}_tip_x"] = q[:, 3 * k] + arm_x
             out[f"{panel}_tip_y"] = q[:, 3 * k + 1] + arm_y
+            out[f"{panel}_tip_vx"] = v[:, 3 * k] - omega * arm_y
+            out[f"{panel}_tip_vy"] = v[:, 3 * k + 1] + omega * arm_x
             out[f"{panel}_tip_ax"] = qdd[:, 3 * k] - omega_dot * arm_y - omega**2 * arm_x
             out[f"{panel}_tip_ay"] = qdd[:, 3 * k + 1] + omega_dot * arm_x - omega**2 * arm_y
         joint_names = list(JOINTS)  # build() appends one element per joint, in this order
