@@ -43,3 +43,13 @@ def test_restitution_coupling_per_hinge():
 def test_bad_friction_roughness_names_the_option():
     with pytest.raises(ValueError, match="friction_roughness = 'x' is invalid; valid: constant"):
         DeployArray(friction_roughness="x")
+
+
+def test_panel_mass_scale_scales_the_panels_only():
+    scene = DeployArray()
+    base = scene.build(scene.resolve_params({}))
+    heavy = scene.build(scene.resolve_params({"panel_mass_scale": 1.5}))
+    for b0, b1 in zip(base.bodies, heavy.bodies, strict=True):
+        factor = 1.5 if b0.name.startswith("panel") else 1.0
+        assert float(b1.mass) == pytest.approx(factor * float(b0.mass), rel=1e-15)
+        assert float(b1.inertia) == pytest.approx(factor * float(b0.inertia), rel=1e-15)

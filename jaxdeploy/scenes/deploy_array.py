@@ -128,6 +128,11 @@ def _shared_params() -> dict[str, ParamSpec]:
             "offset e of the preload's line of action from the hinge axis (moment F_p e, "
             "deploying sense)",
         ),
+        # The panels' mass properties are the reconstruction's estimate (W24 gives no Table 2):
+        # a scale on both panels' mass and inertia, for sensitivities and fits.
+        "panel_mass_scale": ParamSpec(
+            1.0, 0, 100, "", "factor on both panels' mass and inertia", False
+        ),
         "youngs_modulus": ParamSpec(
             g["contact_defaults"]["material"]["E"], 1e6, 1e13, "Pa", "pin/bearing modulus"
         ),
@@ -285,15 +290,11 @@ class DeployArray(Scene):
 
     def build(self, params):
         p = params
-        bodies = [
-            Body(
-                name,
-                GEOMETRY["bodies"][name]["mass"],
-                GEOMETRY["bodies"][name]["inertia"],
-                GEOMETRY["bodies"][name]["points"],
-            )
-            for name in GEOMETRY["body_order"]
-        ]
+        bodies = []
+        for name in GEOMETRY["body_order"]:
+            body = GEOMETRY["bodies"][name]
+            scale = p["panel_mass_scale"] if name.startswith("panel") else 1.0
+            bodies.append(Body(name, scale * body["mass"], scale * body["inertia"], body["points"]))
         elements = []
         for name, joint in JOINTS.items():
             ends = (joint["body_i"], joint["point_i"], joint["body_j"], joint["point_j"])
