@@ -11,7 +11,7 @@ Each device batches its shard by the sweep's `policy` (default: refilled lanes, 
 per simulation measured in docs/batch_throughput.md; see `parse_policy`).
 
 Each finished chunk is written atomically as `chunk_NNNNN.npz` (case indices, parameters,
-status, step counts, optional per-case features and trajectories), then recorded in
+status, step counts, optional per-case features, summaries and trajectories), then recorded in
 `manifest.json` (also written atomically). A chunk counts as done only once it is in the
 manifest and its file exists, so a kill at any moment loses at most the running chunk; `resume`
 re-runs exactly the chunks not yet recorded: no case is lost or duplicated. The manifest stores
@@ -42,7 +42,13 @@ import numpy as np
 
 from ._validation import check_positive
 from .batch import _stack_cases, batch_function, step_control
-from .io import atomic_write_json, atomic_write_npz, check_output_dir, run_metadata
+from .io import (
+    atomic_write_json,
+    atomic_write_npz,
+    check_output_dir,
+    run_metadata,
+    strict_json,
+)
 from .scenes.base import Scene
 from .solvers.step_control import StepControl
 
@@ -172,6 +178,7 @@ def sweep(
     resume: bool = False,
     evaluate: Callable | None = None,
     features: str | None = None,
+    summarize: Callable | None = None,
     save_trajectories: bool = True,
     progress: bool = False,
     stop_after_chunks: int | None = None,
@@ -192,6 +199,11 @@ def sweep(
       non-empty `out_dir` is refused.
     - `evaluate(params, trajectory) -> {name: scalar}`: per-case features computed inside the
       compiled run (e.g. design objectives); `features` names it in the manifest.
+    - `summarize(params, trajectory) -> {name: value}`: per-case quantities computed on the
+      host after each chunk, from the case's own (unbatched) trajectory and its parameters as
+      Python floats (e.g. the scene's summary, which is NumPy post-processing and so cannot
+      run inside the compiled program); stored per case as strict JSON (`summary` in the
+      chunk file, `null` for NaN). Whether a sweep summarizes is part of its definition.
     - `save_trajectories`: store `q`, `v` at the saved times per case.
     - `stop_after_chunks`: stop (raise `KeyboardInterrupt`) after that many chunks of this call
       (tests of resume).
@@ -218,6 +230,7 @@ def sweep(
     definition = _definition(
         scene, grid, fixed, t_end, n_save, control, chunk_size, features, parsed_policy
     )
+    definition["summary"] = summarize is not None
     manifest_path = os.path.join(out_dir, MANIFEST)
     writer = jax.process_index() == 0
 
@@ -230,6 +243,8 @@ def sweep(
         manifest = _read_manifest(manifest_path)
         # Sweeps written before the policy was recorded ran each chunk as one vmap.
         manifest["definition"].setdefault("policy", {"kind": "all"})
+        # ... and those written before per-case summaries were stored had none.
+        manifest["definition"].setdefault("summary", False)
         if manifest["definition"] != definition:
             raise ValueError(
                 f"--resume: the sweep in {out_dir!r} was defined differently "
@@ -293,6 +308,18 @@ def sweep(
             **{f"param_{name}": table[name][index] for name in table},
             **{f"feature_{name}": np.asarray(v)[:n] for name, v in feats.items()},
         }
+        if summarize is not None:
+            arrays["summary"] = np.array(
+                [
+                    strict_json(
+                        summarize(
+                            {name: float(table[name][i]) for name in table},
+                            jax.tree.map(lambda leaf, j=j: leaf[j], trajectory),
+                        )
+                    )
+                    for j, i in enumerate(index)
+                ]
+            )
         if save_trajectories:
             arrays.update(t=np.asarray(ts), q=trajectory.q[:n], v=trajectory.v[:n])
         record = {

@@ -3,6 +3,7 @@ the whole run."""
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -16,24 +17,31 @@ def clearance_joint_history(mechanism: Mechanism, trajectory) -> dict[int, dict]
     states, evaluated with the saved memory (impact velocities). The forces are net of the
     bore's near and far side (`RevoluteClearance.contact_forces`; the far side is zero unless
     the clearance is below ~3σ)."""
-    out = {}
-    for index in mechanism.find(RevoluteClearance):
-        joint = mechanism.elements[index]
+    return {
+        index: _joint_history(mechanism, index, trajectory.q, trajectory.v, trajectory.memory)
+        for index in mechanism.find(RevoluteClearance)
+    }
 
-        def at(q, v, memory, joint=joint, index=index):
-            kin = mechanism.kinematics(q, v)
-            fn, ft, g = joint.contact_forces(kin, memory[index])
-            return {
-                "eccentricity": g.eccentricity,
-                "penetration": g.penetration,
-                "penetration_rate": g.penetration_rate,
-                "sliding_velocity": g.sliding_velocity,
-                "normal_force": fn,
-                "friction_force": jnp.asarray(ft) + 0.0 * fn,
-            }
 
-        out[index] = jax.jit(jax.vmap(at))(trajectory.q, trajectory.v, trajectory.memory)
-    return out
+# Compiled once per mechanism structure and joint, not per call: a sweep evaluates it for
+# every case (the parameters are leaves of `mechanism`, so new values reuse the program).
+@eqx.filter_jit
+def _joint_history(mechanism, index, q, v, memory):
+    joint = mechanism.elements[index]
+
+    def at(q, v, memory):
+        kin = mechanism.kinematics(q, v)
+        fn, ft, g = joint.contact_forces(kin, memory[index])
+        return {
+            "eccentricity": g.eccentricity,
+            "penetration": g.penetration,
+            "penetration_rate": g.penetration_rate,
+            "sliding_velocity": g.sliding_velocity,
+            "normal_force": fn,
+            "friction_force": jnp.asarray(ft) + 0.0 * fn,
+        }
+
+    return jax.vmap(at)(q, v, memory)
 
 
 def contact_extremes(mechanism: Mechanism, trajectory) -> dict[int, dict]:

@@ -71,8 +71,13 @@ def _ideal_reference_cached(ts_key, t_end, control, param_key, latch):
 
 def ideal_reference(scene, params, trajectory):
     """The ideal-joint mechanism's trajectory at the same saved times (cached)."""
+    from ..scenes.deploy_array import DeployArray
+
     ts = tuple(np.asarray(trajectory.ts).tolist())
-    shared = tuple(sorted((k, float(v)) for k, v in params.items()))
+    # Keyed by the parameters the ideal mechanism uses: runs that differ only in their
+    # hinges' contact (a sweep over roughness or clearance) share one reference.
+    unused = DeployArray(ideal=True, latch=scene.options["latch"]).ignored_params()
+    shared = tuple(sorted((k, float(v)) for k, v in params.items() if k not in unused))
     # A StepControl is frozen and hashable: it keys the cache as it is.
     return _ideal_reference_cached(
         ts, ts[-1], scene.default_control, shared, scene.options["latch"]

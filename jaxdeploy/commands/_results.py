@@ -67,6 +67,23 @@ SUMMARY_KEYS = (
 )
 
 
+def run_quantities(trajectory) -> dict:
+    """The quantities every run reports, whatever its scene: status, time reached, steps."""
+    return {
+        "status": trajectory.status(),
+        # Where the integration stopped: t_end, or the failure's time (not the last save).
+        "t_reached_s": trajectory.time_reached(),
+        "n_steps": int(trajectory.stats["num_accepted_steps"]),
+        "n_rejected": int(trajectory.stats["num_rejected_steps"]),
+        # Newton iterations exist only for generalized-α; null for the explicit diffrax path.
+        "n_newton_iterations": (
+            int(trajectory.stats["num_newton_iterations"])
+            if "num_newton_iterations" in trajectory.stats
+            else None
+        ),
+    }
+
+
 def describe_key(key: str) -> tuple[str, str] | None:
     """`(unit, description)` of summary key `key`, or None if it is not documented."""
     for pattern, unit, description in SUMMARY_KEYS:

@@ -171,7 +171,7 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
         strict_json,
     )
     from ..simulation import simulate
-    from ._results import units_of
+    from ._results import run_quantities, units_of
 
     prepare_output_dir(out, args.overwrite)
     # summary.json is written last and marks a complete result; drop the old one first so a
@@ -196,17 +196,7 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
     summary = {
         "scene": scene.name,
         "t_end_s": t_end,
-        "status": trajectory.status(),
-        # Where the integration stopped: t_end, or the failure's time (not the last save).
-        "t_reached_s": trajectory.time_reached(),
-        "n_steps": int(trajectory.stats["num_accepted_steps"]),
-        "n_rejected": int(trajectory.stats["num_rejected_steps"]),
-        # Newton iterations exist only for generalized-α; null for the explicit diffrax path.
-        "n_newton_iterations": (
-            int(trajectory.stats["num_newton_iterations"])
-            if "num_newton_iterations" in trajectory.stats
-            else None
-        ),
+        **run_quantities(trajectory),
     }
     with phases.phase("outputs", "outputs: summary quantities, trajectory.npz"):
         summary.update(scene.summary(params, mechanism, trajectory))

@@ -1,9 +1,11 @@
 """`jaxdeploy sweep --scene S --grid NAME=v1,v2,... --out DIR [--resume] [--policy P]`: run the
 Cartesian product of parameter values as batched chunks sharded over all devices, written
-chunk by chunk, resumable (see `jaxdeploy.sweep`)."""
+chunk by chunk, resumable (see `jaxdeploy.sweep`); then every finished case's features
+(summary quantities, objective terms) as features.csv/features.json and overview.png."""
 
 from __future__ import annotations
 
+import os
 import sys
 
 from ._args import (
@@ -153,6 +155,7 @@ def run(args) -> int:
     from ..io import default_output_dir
     from ..scenes import SCENES, get_scene
     from ..sweep import DEFAULT_CHUNK_SIZE, DEFAULT_POLICY, grid_cases, parse_policy, sweep
+    from ._results import run_quantities
 
     # Every refusal happens before anything is written or compiled (the ideal reference of an
     # --objective is a simulation: it comes after the checks).
@@ -183,6 +186,12 @@ def run(args) -> int:
     t_end = scene.default_t_end if args.t_end is None else args.t_end
     out = args.out or default_output_dir("sweep", scene.name)
     evaluate, features = None, None
+
+    def summarize(params, trajectory):
+        # What `jaxdeploy simulate` would report for this case (docs/results.md).
+        mechanism = scene.build(params)
+        return {**run_quantities(trajectory), **scene.summary(params, mechanism, trajectory)}
+
     try:
         if objective is not None:
             from ..optimize import DesignProblem
@@ -209,6 +218,7 @@ def run(args) -> int:
             resume=args.resume,
             evaluate=evaluate,
             features=features,
+            summarize=summarize,
             save_trajectories=not args.no_trajectories,
             progress=not args.quiet,
         )
@@ -219,9 +229,18 @@ def run(args) -> int:
         return 1
     failed = sum(c["failed"] for c in manifest["chunks"])
     done = sum(c["stop"] - c["start"] for c in manifest["chunks"])
+    written = [os.path.join(out, "manifest.json")]
+    if jax.process_index() == 0 and done:
+        from ..sweep import load_sweep
+        from ._sweep_outputs import plot_overview, write_features
+
+        data = load_sweep(out)
+        written += write_features(out, scene, data, list(grid))
+        figure = plot_overview(out, scene, data, list(grid), grid)
+        written += [] if figure is None else [figure]
     if not args.quiet:
         print(
             f"sweep: {done}/{manifest['n_cases']} cases in {len(manifest['chunks'])} chunks, "
-            f"{failed} failed; wrote {out}/manifest.json"
+            f"{failed} failed; wrote " + ", ".join(written)
         )
     return 0 if failed == 0 and done == manifest["n_cases"] else 1
