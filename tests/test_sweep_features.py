@@ -2,9 +2,12 @@
 the quantities `jaxdeploy simulate` reports, with units, as strict CSV/JSON and an overview
 figure; and the sweep compiles its simulation once, whatever its number of chunks."""
 
+import contextlib
 import csv
+import io
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -58,16 +61,22 @@ def swept(tmp_path_factory):
 
     sweep_module.sweep = marked_sweep
     out = tmp_path_factory.mktemp("sweep") / "pendulum"
+    printed, progress = io.StringIO(), io.StringIO()
     try:
-        code = main(["sweep", "--scene", "pendulum",
-                     "--grid", "length=" + ",".join(map(str, LENGTHS)),
-                     "--grid", "initial_angle=" + ",".join(map(str, ANGLES)),
-                     "--t-end", str(T_END), "--n-save", str(N_SAVE), "--chunk-size", "4",
-                     "--out", str(out), "--quiet"])  # fmt: skip
+        with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(progress):
+            code = main(["sweep", "--scene", "pendulum",
+                         "--grid", "length=" + ",".join(map(str, LENGTHS)),
+                         "--grid", "initial_angle=" + ",".join(map(str, ANGLES)),
+                         "--t-end", str(T_END), "--n-save", str(N_SAVE), "--chunk-size", "4",
+                         "--out", str(out)])  # fmt: skip
     finally:
         sweep_module.sweep = original
         listening[0] = False
-    assert code == 0
+    assert code == 0, progress.getvalue()
+    # Progress (issue 22 item 2): cases done of all, elapsed<remaining (the ETA).
+    assert re.search(r"10/10 \[\d+:\d+<\d+:\d+", progress.getvalue()), progress.getvalue()
+    assert "10/10 cases in 3 chunks, 0 failed" in printed.getvalue()
+    assert "features.csv" in printed.getvalue() and "overview.png" in printed.getvalue()
     return out, compiles, marks
 
 

@@ -189,8 +189,16 @@ def run(args) -> int:
 
     def summarize(params, trajectory):
         # What `jaxdeploy simulate` would report for this case (docs/results.md).
-        mechanism = scene.build(params)
-        return {**run_quantities(trajectory), **scene.summary(params, mechanism, trajectory)}
+        quantities = run_quantities(trajectory)
+        try:
+            quantities.update(scene.summary(params, scene.build(params), trajectory))
+        except Exception:
+            # A failed case's states past the failure may be NaN and leave nothing to
+            # summarize: it keeps its status and steps (and null for the rest). A successful
+            # case whose summary fails is a bug: raise it.
+            if trajectory.ok:
+                raise
+        return quantities
 
     try:
         if objective is not None:
