@@ -27,6 +27,7 @@ FLOORS = {
     "batch": 7,
     "lanes": 7,
     "sweep": 7,
+    "robustness": 7,
     "fit": 7,
     "objectives": 7,
     "optimize": 7,
