@@ -10,9 +10,6 @@
   reference writes from Flores & Ambrósio (2004).
 """
 
-import math
-
-import jax.numpy as jnp
 import numpy as np
 import pytest
 from independent.crossings import level_crossings
@@ -28,21 +25,15 @@ from independent.package_runs import (
     IMPACT,
     IMPACT_T_END,
     IMPACT_TS,
+    SPINNING,
     impact_run,
     return_to_centre,
+    slider_crank_stiffness,
+    spinning_journal,
 )
 from independent.slider_crank_minimal import SliderCrankMinimal
 
-from jaxdeploy import contact
-from jaxdeploy.mechanism import (
-    Body,
-    Gravity,
-    Mechanism,
-    RevoluteClearance,
-    consistent_state,
-)
 from jaxdeploy.scenes import get_scene
-from jaxdeploy.simulation import simulate
 
 MASS, SPEED, STIFFNESS = IMPACT["mass"], IMPACT["speed"], IMPACT["stiffness"]
 CLEARANCE, SIGMA = IMPACT["clearance"], IMPACT["sigma"]
@@ -141,35 +132,8 @@ def test_spinning_journal_friction_circle_closed_form():
     −R_j F_T, so ω(t) = ω0 − μ W R_j cos α t / J exactly (the friction circle; e.g. Shigley,
     *Mechanical Engineering Design*, journal-bearing friction). A friction force applied at the
     wrong point, with the wrong sign or the wrong magnitude moves the journal off this point."""
-    mass, g, radius, clearance, stiffness = 1.0, 9.81, 5e-3, 1e-4, 1e10
-    mu, slip, omega0 = 0.1, 1e-3, 100.0
-    inertia = 0.5 * mass * radius**2
-    alpha = math.atan(mu)
-    normal_force = mass * g * math.cos(alpha)
-    distance = clearance + (normal_force / stiffness) ** (2.0 / 3.0)
-    joint = RevoluteClearance(
-        "ground",
-        "B",
-        "journal",
-        "c",
-        clearance=clearance,
-        journal_radius=radius,
-        normal=contact.Undamped(contact.HertzElastic(stiffness)),
-        friction=contact.SmoothCoulomb(mu=mu, slip_velocity=slip, shape="tanh"),
-    )
-    mech = Mechanism(
-        [Body("journal", mass, inertia, {"c": (0.0, 0.0)})],
-        [joint, Gravity((0.0, -g))],
-        ground_points={"B": (0.0, 0.0)},
-    )
-    centre = np.array([-distance * math.sin(alpha), -distance * math.cos(alpha)])
-    state = consistent_state(mech, jnp.array([*centre, 0.0]), jnp.array([0.0, 0.0, omega0]))
-    t_end = 0.05
-    ts = np.linspace(0.0, t_end, 51)
-    run = simulate(mech, state, t_end, ts=ts, rtol=1e-10, atol=1e-13)
-    assert run.ok, run.status()
-    deceleration = mu * mass * g * radius * math.cos(alpha) / inertia
-    q, v = np.asarray(run.q), np.asarray(run.v)
+    ts, q, v, centre, deceleration = spinning_journal(rtol=1e-10, atol=1e-13)
+    omega0, radius, slip = SPINNING["omega0"], SPINNING["radius"], SPINNING["slip"]
     np.testing.assert_allclose(v[:, 2], omega0 - deceleration * ts, rtol=1e-12, atol=0)
     np.testing.assert_allclose(
         q[:, 2], omega0 * ts - 0.5 * deceleration * ts**2, rtol=0, atol=1e-12
@@ -181,10 +145,7 @@ def test_spinning_journal_friction_circle_closed_form():
 def test_slider_crank_stiffness_is_the_papers():
     """K = 4/(3(σ_i + σ_j)) sqrt(R_i R_j/(R_i − R_j)) (Flores & Ambrósio 2004), written in the
     reference, equals the stiffness the scene builds, for the default and another geometry."""
-    scene = get_scene("slider_crank")
     for overrides in ({}, {"clearance": 0.1e-3, "journal_radius": 12e-3, "poisson_ratio": 0.25}):
-        params = scene.resolve_params(overrides)
-        (joint,) = [e for e in scene.build(params).elements if isinstance(e, RevoluteClearance)]
-        used = float(joint.normal.elastic.stiffness_coefficient)
+        used = slider_crank_stiffness(overrides)
         assert used == pytest.approx(SliderCrankMinimal(overrides).K, rel=1e-14)
     assert SliderCrankMinimal().K == pytest.approx(6.6102e10, rel=1e-4)

@@ -1,15 +1,25 @@
 """Runs of the *package* in the form the references are compared in (used by the tests and by
-`experiments/independent_references.py`). Unlike the references next to it, this module
+`python -m independent.report`). Unlike the references next to it, this module
 imports jaxdeploy: it is the measuring side, not the reference side."""
 
 from __future__ import annotations
 
 import math
 
+import jax.numpy as jnp
 import numpy as np
 
-from jaxdeploy.scenes import Impact, SliderCrank
-from jaxdeploy.simulation import simulate
+from jaxdeploy import (
+    Body,
+    Gravity,
+    Impact,
+    Mechanism,
+    RevoluteClearance,
+    SliderCrank,
+    consistent_state,
+    contact,
+    simulate,
+)
 
 from .crossings import level_crossings
 
@@ -68,3 +78,49 @@ def return_to_centre(x, v):
     """`(t, |ẋ|)` when the journal is back at the bearing's centre (the rebound speed)."""
     (t_back,) = level_crossings(IMPACT_TS[1:], x[1:], v[1:], 0.0)
     return t_back, abs(float(np.interp(t_back, IMPACT_TS, v)))
+
+
+# A journal spinning in a fixed bearing under its weight, Coulomb friction (tanh) and an
+# undamped Hertz wall: its equilibrium is on the wall at tan α = μ, and it spins down at
+# μ W R_j cos α / J (the friction circle; tests/test_independent_contact.py derives it).
+SPINNING = dict(mass=1.0, g=9.81, radius=5e-3, clearance=1e-4, stiffness=1e10, mu=0.1,
+                slip=1e-3, omega0=100.0, t_end=0.05)  # fmt: skip
+
+
+def spinning_journal(**control):
+    """`(ts, q, v, centre, deceleration)` of the spinning journal (`SPINNING`) on 51 saved
+    times: `centre` [m] the closed-form equilibrium, `deceleration` [rad/s²] the closed-form
+    spin-down rate."""
+    p = SPINNING
+    inertia = 0.5 * p["mass"] * p["radius"] ** 2
+    alpha = math.atan(p["mu"])
+    normal_force = p["mass"] * p["g"] * math.cos(alpha)
+    distance = p["clearance"] + (normal_force / p["stiffness"]) ** (2.0 / 3.0)
+    joint = RevoluteClearance(
+        "ground", "B", "journal", "c", clearance=p["clearance"], journal_radius=p["radius"],
+        normal=contact.Undamped(contact.HertzElastic(p["stiffness"])),
+        friction=contact.SmoothCoulomb(mu=p["mu"], slip_velocity=p["slip"], shape="tanh"),
+    )  # fmt: skip
+    mech = Mechanism(
+        [Body("journal", p["mass"], inertia, {"c": (0.0, 0.0)})],
+        [joint, Gravity((0.0, -p["g"]))],
+        ground_points={"B": (0.0, 0.0)},
+    )
+    centre = np.array([-distance * math.sin(alpha), -distance * math.cos(alpha)])
+    velocity = jnp.array([0.0, 0.0, p["omega0"]])
+    state = consistent_state(mech, jnp.array([*centre, 0.0]), velocity)
+    ts = np.linspace(0.0, p["t_end"], 51)
+    run = simulate(mech, state, p["t_end"], ts=ts, **control)
+    if not run.ok:
+        raise RuntimeError(f"spinning journal, {control}: {run.status()}")
+    deceleration = p["mu"] * normal_force * p["radius"] / inertia
+    return ts, np.asarray(run.q), np.asarray(run.v), centre, deceleration
+
+
+def slider_crank_stiffness(overrides=None) -> float:
+    """The Hertz stiffness K [N/m^1.5] the slider_crank scene builds for `overrides`."""
+    scene = SliderCrank()
+    params = scene.resolve_params(overrides or {})
+    mech = scene.build(params)
+    (index,) = mech.find(RevoluteClearance)
+    return float(mech.elements[index].normal.elastic.stiffness_coefficient)

@@ -1,5 +1,6 @@
-"""The package against the independent references of tests/independent (issue 19): writes the
-generated block `independent-references` of docs/verification.md.
+"""The package against the independent references of this folder (issue 19): writes the
+generated block `independent-references` of docs/verification.md. Verification, not a study:
+it lives beside the references and the tests that assert bounds on the same quantities.
 
 Each row runs the package (public API) and compares it with a reference that shares no code
 with it: the minimal-coordinate slider-crank (stored fixture tests/data/slider_crank_reference
@@ -8,27 +9,23 @@ here), the friction-circle closed form, and the paper's Hertz stiffness. The tes
 (tests/test_independent_*.py) assert bounds on the same quantities; this script records the
 values reached.
 
-Usage: `python experiments/independent_references.py` (~10 min on one core).
+Usage: `cd tests && PYTHONPATH=.. python -m independent.report` (~10 min on one core).
 """
 
 from __future__ import annotations
 
-import math
+import json
 import os
-import sys
 import time
 
 import numpy as np
 
-from jaxdeploy.io import replace_block
+from jaxdeploy.io import machine_description, replace_block, revision_label
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
-sys.path.insert(0, os.path.join(ROOT, "tests"))
-
-from independent import generate  # noqa: E402
-from independent.crossings import level_crossings  # noqa: E402
-from independent.impact_rough import RoughWall, damped_impact, undamped_impact  # noqa: E402
-from independent.package_runs import (  # noqa: E402
+from . import generate
+from .crossings import level_crossings
+from .impact_rough import RoughWall, damped_impact, undamped_impact
+from .package_runs import (
     IMPACT,
     IMPACT_TS,
     TWO_REVOLUTIONS,
@@ -36,12 +33,12 @@ from independent.package_runs import (  # noqa: E402
     return_to_centre,
     slider_crank_run,
     slider_crank_scene,
+    slider_crank_stiffness,
+    spinning_journal,
 )
-from independent.slider_crank_minimal import SliderCrankMinimal  # noqa: E402
+from .slider_crank_minimal import SliderCrankMinimal
 
-from jaxdeploy.io import machine_description  # noqa: E402
-from jaxdeploy.mechanism import RevoluteClearance  # noqa: E402
-
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..")
 DOC = os.path.join(ROOT, "docs", "verification.md")
 TIGHT = {"rtol": 1e-10, "atol": 1e-13, "max_steps": 400_000}
 INDEPENDENT_SC = (
@@ -168,38 +165,10 @@ def impact_rows():
 
 
 def friction_row():
-    import jax.numpy as jnp
-
-    from jaxdeploy import contact
-    from jaxdeploy.mechanism import Body, Gravity, Mechanism, consistent_state
-    from jaxdeploy.simulation import simulate
-
-    mass, g, radius, clearance, stiffness, mu, omega0 = 1.0, 9.81, 5e-3, 1e-4, 1e10, 0.1, 100.0
-    inertia = 0.5 * mass * radius**2
-    alpha = math.atan(mu)
-    distance = clearance + (mass * g * math.cos(alpha) / stiffness) ** (2.0 / 3.0)
-    joint = RevoluteClearance(
-        "ground",
-        "B",
-        "journal",
-        "c",
-        clearance=clearance,
-        journal_radius=radius,
-        normal=contact.Undamped(contact.HertzElastic(stiffness)),
-        friction=contact.SmoothCoulomb(mu=mu, slip_velocity=1e-3, shape="tanh"),
-    )
-    mech = Mechanism(
-        [Body("journal", mass, inertia, {"c": (0.0, 0.0)})],
-        [joint, Gravity((0.0, -g))],
-        ground_points={"B": (0.0, 0.0)},
-    )
-    centre = np.array([-distance * math.sin(alpha), -distance * math.cos(alpha)])
-    state = consistent_state(mech, jnp.array([*centre, 0.0]), jnp.array([0.0, 0.0, omega0]))
-    ts = np.linspace(0.0, 0.05, 51)
-    run = simulate(mech, state, 0.05, ts=ts, rtol=1e-10, atol=1e-13)
-    decel = mu * mass * g * radius * math.cos(alpha) / inertia
-    w_err = np.max(np.abs(np.asarray(run.v)[:, 2] - (omega0 - decel * ts))) / omega0
-    drift = np.max(np.abs(np.asarray(run.q)[:, :2] - centre))
+    ts, q, v, centre, deceleration = spinning_journal(rtol=1e-10, atol=1e-13)
+    omega0 = v[0, 2]
+    w_err = np.max(np.abs(v[:, 2] - (omega0 - deceleration * ts))) / omega0
+    drift = np.max(np.abs(q[:, :2] - centre))
     return [
         "journal spinning in a loaded bearing, μ = 0.1 (tanh), generalized-α rtol 1e-10",
         "closed form: tan α = μ, ω̇ = −μ W R_j cos α / J",
@@ -209,13 +178,7 @@ def friction_row():
 
 
 def stiffness_row():
-    from jaxdeploy.scenes import get_scene
-
-    scene = get_scene("slider_crank")
-    params = scene.resolve_params()
-    (joint,) = [e for e in scene.build(params).elements if isinstance(e, RevoluteClearance)]
-    used = float(joint.normal.elastic.stiffness_coefficient)
-    paper = SliderCrankMinimal().K
+    used, paper = slider_crank_stiffness(), SliderCrankMinimal().K
     return [
         "slider_crank Hertz stiffness K",
         "Flores & Ambrósio (2004): 4/(3(σ_i + σ_j)) sqrt(R_i R_j/(R_i − R_j))",
@@ -233,8 +196,6 @@ def main():
     start = time.perf_counter()
     with np.load(generate.PATH) as data:
         reference = {k: np.array(data[k]) for k in data.files}
-    import json
-
     meta = json.loads(str(reference["meta"]))
     rows, notes = slider_crank_rows(reference)
     rows += impact_rows()
@@ -242,8 +203,9 @@ def main():
     lines = [
         "## Independent references",
         "",
-        "*Generated by `experiments/independent_references.py`; do not edit by hand.* "
-        f"Machine: {machine_text()}; run time {time.perf_counter() - start:.0f} s (one process, "
+        "*Generated by `cd tests && python -m independent.report` at "
+        f"{revision_label()}; do not edit by hand.* Machine: {machine_text()}; run time "
+        f"{time.perf_counter() - start:.0f} s (one process, "
         "including compilation).",
         "",
         "References in tests/independent/ (README there) import nothing from jaxdeploy. The "
