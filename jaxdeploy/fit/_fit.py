@@ -7,10 +7,13 @@ comes from forward-mode AD through the solver (`jax.jacfwd` with `diffrax.Forwar
 tangent per fitted parameter, so the cost grows with the number of parameters, which is small
 here). Residuals and Jacobian are one compiled function, evaluated once per LM trial step.
 
-The optimiser is optimistix's Levenberg–Marquardt (lineax QR for the damped Gauss–Newton
-step, a classical trust-region update of the damping), stepped one trial point at a time by
-`levenberg_marquardt` so that every trial is reported (progress, loss history) and a failed
-simulation is a rejected step (infinite loss), not a NaN inside the optimiser.
+The optimiser (`levenberg_marquardt`) is Levenberg–Marquardt with Marquardt's diagonal
+scaling and Nielsen's damping update (Madsen, Nielsen & Tingleff 2004, Alg. 3.16), a loop in
+Python around the compiled evaluation, so that every trial is reported (progress, loss
+history) and a failed simulation is a rejected step, not a NaN inside the optimiser. It stays
+rather than optimistix's `LevenbergMarquardt` (identity damping in the internal coordinates)
+because it reached the truth from more starts on our problems
+(`experiments/identification_solvers.py`, docs/identification.md).
 
 Rugged losses (impacts make the loss jump between basins: a guess 50 % off in restitution
 can sit in another basin) get a global first stage, `starts=N`: N points of a Latin hypercube
@@ -30,7 +33,6 @@ parameter space is seen.
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -212,19 +214,20 @@ class FitResult:
 
 
 class Model:
-    """The compiled map z → (model channels at the save times `ts`, their Jacobian d/dz,
-    solver status) for one scene, one parameter set to fit and one set of save times.
+    """The compiled map z → (model channels at the save times, their Jacobian d/dz, solver
+    status) for one scene, one parameter set to fit and save times up to `ts`.
 
     Residuals are linear maps of the channel samples (samples, block means, kernel averages:
     `Comparison`), so their Jacobian is the same map applied to the channels' Jacobian. One
-    compiled model therefore serves every residual stage with the same save times (e.g.
-    continuation in the smoothing width), without recompiling.
+    compiled model therefore serves every residual stage (continuation in the smoothing
+    width, and in the horizon: save times and the end time are data, so a stage that needs
+    only the first n of `ts` runs to `ts[n − 1]` with the rest of the save times set to it;
+    one compilation for the whole schedule).
     """
 
     def __init__(self, scene, parameters, fixed, names, ts, control, simulate_options):
         import diffrax as dfx
         import jax
-        import jax.numpy as jnp
 
         from ..batch import run_scene, step_control
         from ._derivatives import _adaptive
@@ -236,15 +239,17 @@ class Model:
             # `simulate(..., replay_steps=True)`), not a loop that re-decides them.
             simulate_options = {"replay_steps": True, **simulate_options}
 
-        def evaluate(z):
+        self.ts = ts
+
+        def evaluate(z, ts_run):
             params = dict(fixed)
             for k, p in enumerate(parameters):
                 params[p.name] = p.to_physical(z[k])
             traj = run_scene(
                 scene,
                 params,
-                float(ts[-1]),
-                ts=jnp.asarray(ts),
+                ts_run[-1],
+                ts=ts_run,
                 control=control,
                 adjoint=dfx.ForwardMode(),
                 **simulate_options,
@@ -254,16 +259,25 @@ class Model:
             return model, (model, ok)
 
         self._jac = jax.jit(jax.jacfwd(evaluate, has_aux=True))
-        self._batch = jax.jit(jax.vmap(lambda z: evaluate(z)[1]))
+        self._batch = jax.jit(jax.vmap(lambda z, t: evaluate(z, t)[1], in_axes=(0, None)))
 
-    def channels_batch(self, zs):
-        """Channels of many points `zs` (k, p) as one vmapped batch: `({name: (k, n)}, ok)`."""
-        model, ok = self._batch(np.asarray(zs, dtype=float))
+    def save_times(self, n: int | None = None) -> np.ndarray:
+        """The first `n` save times, padded with the last of them to the compiled length."""
+        n = self.ts.size if n is None else int(n)
+        if not 1 <= n <= self.ts.size:
+            raise ValueError(f"n = {n} save times: must be in [1, {self.ts.size}]")
+        return np.concatenate([self.ts[:n], np.full(self.ts.size - n, self.ts[n - 1])])
+
+    def channels_batch(self, zs, n: int | None = None):
+        """Channels of many points `zs` (k, p) as one vmapped batch: `({name: (k, N)}, ok)`
+        (only the first `n` samples are the save times; see `save_times`)."""
+        model, ok = self._batch(np.asarray(zs, dtype=float), self.save_times(n))
         return {n: np.asarray(v) for n, v in model.items()}, np.asarray(ok)
 
-    def __call__(self, z):
-        """`(channels, d channels/dz, ok)` at `z`: `{name: (n,)}`, `{name: (n, p)}`."""
-        jac, (model, ok) = self._jac(np.asarray(z, dtype=float))
+    def __call__(self, z, n: int | None = None):
+        """`(channels, d channels/dz, ok)` at `z` up to the `n`-th save time: `{name: (N,)}`,
+        `{name: (N, p)}`, of which the first `n` samples are the save times."""
+        jac, (model, ok) = self._jac(np.asarray(z, dtype=float), self.save_times(n))
         model = {n: np.asarray(v) for n, v in model.items()}
         jac = {n: np.asarray(v) for n, v in jac.items()}
         ok = bool(ok) and all(np.all(np.isfinite(v)) for v in (*model.values(), *jac.values()))
@@ -279,7 +293,7 @@ class StageModel:
     def costs(self, zs):
         """Costs ½|r|² of many points `zs` (k, p) as one vmapped batch; inf where the
         simulation failed or gave non-finite residuals."""
-        channels, ok = self.model.channels_batch(zs)
+        channels, ok = self.model.channels_batch(zs, self.comparison.n_save)
         with np.errstate(invalid="ignore", over="ignore"):  # failed runs: NaN channels
             cost = self._costs(channels, ok)
         return np.where(ok & np.isfinite(cost), cost, np.inf)
@@ -296,7 +310,9 @@ class StageModel:
         )
 
     def __call__(self, z):
-        channels, jac, ok = self.model(z)
+        n = self.comparison.n_save
+        channels, jac, ok = self.model(z, n)
+        channels = {name: v[:n] for name, v in channels.items()}
         r = self.comparison.residuals_np(channels)
         jr = self.comparison.residual_jacobian(jac)
         ok = ok and bool(np.all(np.isfinite(r))) and bool(np.all(np.isfinite(jr)))
@@ -314,24 +330,6 @@ def latin_hypercube_starts(parameters, n: int, seed: int) -> np.ndarray:
     return np.log(s / (1.0 - s))
 
 
-def _linearisation(z, args):
-    """The model as optimistix sees it: its linearisation `r₀ + J₀ (z − z₀)` at the point z₀
-    where the solver evaluates next (`levenberg_marquardt`)."""
-    r0, jac0, z0 = args
-    return r0 + jac0 @ (z - z0), None
-
-
-@functools.cache
-def _stepper():
-    import equinox as eqx
-
-    @eqx.filter_jit
-    def step(solver, y, args, state):
-        return solver.step(_linearisation, y, args, {}, state, frozenset())
-
-    return step
-
-
 def levenberg_marquardt(
     model: Callable,
     z0: np.ndarray,
@@ -340,39 +338,36 @@ def levenberg_marquardt(
     ftol: float = 1e-8,
     ctol: float = 0.0,
     xtol: float = 1e-8,
+    gtol: float = 1e-10,
+    tau: float = 1e-3,
     zmax: float = math.inf,
     callback: Callable | None = None,
 ):
-    """Minimise ½|r(z)|² with `model(z) -> (r, J, aux, ok)`: optimistix's Levenberg–Marquardt
-    (`optx.LevenbergMarquardt` with lineax's QR solve of the damped least-squares problem
-    [J; √λ I] h = −[r; 0], and the classical trust-region update of λ = 1/step size: a trial
-    is accepted when its actual decrease of ½|r|² is at least 0.01 of the Gauss–Newton model's
-    prediction, the step size grows ×3.5 when it exceeds 0.99 of it and shrinks ×¼ on a
-    rejection; Conn, Gould & Toint, *Trust-Region Methods*, SIAM 2000, Alg. 6.1.1).
+    """Minimise F(z) = ½|r(z)|² with `model(z) -> (r, J, aux, ok)`: Levenberg–Marquardt with
+    Marquardt's diagonal scaling and Nielsen's damping update.
 
-    The solver is stepped here, one `step` per trial point, rather than run by
-    `optx.least_squares`, so that (a) every trial is reported (`callback`, history) and
-    (b) the model is our compiled residual-and-Jacobian function, evaluated once per trial.
-    A Gauss–Newton-type `step` evaluates its function once, linearised, at its next trial
-    point (`state.y_eval`); it is handed the model's linearisation there (`_linearisation`:
-    value r, Jacobian J), which is all it uses. A failed simulation (`ok` false) enters as
-    r = +inf: its loss is infinite, the trust region rejects it and shrinks the step.
-    Internal coordinates beyond ±`zmax` are evaluated at ±`zmax` with a zero Jacobian column
-    (the derivative of the clip), so a parameter driven there stays at its bound.
+    The trial step h solves the damped Gauss–Newton problem
 
-    Stops when optimistix's Cauchy criterion holds (accepted step and change of every residual
-    below `xtol` relative/absolute), when an accepted step lowers the cost by less than `ftol`
-    relative or by less than `ctol` absolute (residuals in noise units: a change of ½ in the
-    cost is one standard error, so a decrease far below that is statistically irrelevant),
-    before a trial whose step is below `xtol (|z| + xtol)` or whose Gauss–Newton predicted
-    decrease is below `ctol`, or after `max_iterations` trials. **Returns:** `(z, r, J, aux,
-    info)` at the best accepted point, with the model's Jacobian there.
+        (JᵀJ + μ D) h = −Jᵀr,   D = diag(JᵀJ)
+
+    (Marquardt, *J. SIAM* 11 (1963) 431; the scaling makes the step invariant to the units of
+    each coordinate, Moré, *Lecture Notes in Mathematics* 630 (1978) 105), solved as the
+    least-squares problem [J; √μ D^½] h ≈ −[r; 0] (orthogonal factorisation, not the normal
+    equations). The gain ratio ρ = (F(z) − F(z + h)) / (L(0) − L(h)), L(h) = ½|r + J h|² the
+    Gauss–Newton model, accepts the step when ρ > 0 and updates μ ← μ·max(⅓, 1 − (2ρ − 1)³),
+    ν ← 2; a rejection sets μ ← μν, ν ← 2ν (Madsen, Nielsen & Tingleff, *Methods for
+    non-linear least squares problems*, 2nd ed., DTU 2004, Alg. 3.16 and eq. 3.14); μ starts
+    at `tau`. A failed simulation (`ok` false) is a rejected step. Internal coordinates are
+    kept in [−`zmax`, `zmax`].
+
+    Stops before a trial whose step is below `xtol (|z| + xtol)` or whose predicted decrease
+    L(0) − L(h) is below `ctol` (near the optimum an adaptive-step model's cost is noisy: a
+    trial that could not lower F by a statistically relevant amount even if the model were
+    linear is not worth a run), when |Jᵀr|_∞ ≤ `gtol`, when an accepted step lowers F by less
+    than `ftol` relative or `ctol` absolute (residuals in noise units: F changes by ½ over one
+    standard error), or after `max_iterations` trials. **Returns:** `(z, r, J, aux, info)` at
+    the best accepted point, with the model's Jacobian there.
     """
-    import jax
-    import jax.numpy as jnp
-    import lineax as lx
-    import optimistix as optx
-
     z = np.clip(np.asarray(z0, dtype=float), -zmax, zmax)
     r, jac, aux, ok = model(z)
     if not ok:
@@ -381,30 +376,26 @@ def levenberg_marquardt(
             "gave non-finite outputs); change the guess, the bounds or the step control"
         )
     aux0 = aux
-    solver = optx.LevenbergMarquardt(rtol=xtol, atol=xtol, linear_solver=lx.QR())
-    step = _stepper()
-    args = (jnp.asarray(r), jnp.asarray(jac), jnp.asarray(z))
-    f_struct = jax.ShapeDtypeStruct(r.shape, r.dtype)
-    y = jnp.asarray(z)
-    state = solver.init(_linearisation, y, args, {}, f_struct, None, frozenset())
-    y, state, _ = step(solver, y, args, state)  # optimistix's first step accepts the start
     cost = 0.5 * float(r @ r)
     history = [dict(iteration=0, cost=cost, accepted=True, step=0.0, z=z.tolist())]
     if callback:
         callback(history[-1])
+    mu, nu = tau, 2.0
     evaluations, converged, message = 1, False, "maximum number of iterations reached"
     iteration = 0
-    jac_seen = jac  # the Jacobian optimistix holds for the accepted point
     for iteration in range(1, max_iterations + 1):
-        trial = np.asarray(state.y_eval)
-        h = trial - np.asarray(y)
-        # The Gauss–Newton model's decrease for this trial, ½|r|² − ½|r + J h|²: near the
-        # optimum the cost of an adaptive-step model is noisy (step sequences change with the
-        # parameters), the trust region keeps rejecting trials that change it by noise and
-        # shrinks the step only ×¼ per rejection; a trial that could not lower ½χ² by a
-        # statistically relevant amount even if the model were linear is not worth a run.
-        predicted = 0.5 * float(r @ r) - 0.5 * float(np.sum((r + jac_seen @ h) ** 2))
-        if np.linalg.norm(h) <= xtol * (np.linalg.norm(trial) + xtol):
+        g = jac.T @ r
+        if np.max(np.abs(g)) <= gtol:
+            iteration -= 1
+            converged, message = True, "gradient below tolerance"
+            break
+        d = np.sum(jac * jac, axis=0)
+        d = np.maximum(d, 1e-12 * max(float(np.max(d)), 1e-300))
+        augmented = np.vstack([jac, np.diag(np.sqrt(mu * d))])
+        h = np.linalg.lstsq(augmented, -np.concatenate([r, np.zeros(z.size)]), rcond=None)[0]
+        h = np.clip(z + h, -zmax, zmax) - z
+        predicted = cost - 0.5 * float(np.sum((r + jac @ h) ** 2))  # L(0) − L(h)
+        if np.linalg.norm(h) <= xtol * (np.linalg.norm(z) + xtol):
             iteration -= 1
             converged, message = True, "step below tolerance"
             break
@@ -412,45 +403,33 @@ def levenberg_marquardt(
             iteration -= 1
             converged, message = True, "predicted decrease below ctol (statistically negligible)"
             break
-        clipped = np.abs(trial) > zmax
-        z_trial = np.clip(trial, -zmax, zmax)
-        r_new, jac_new, aux_new, ok = model(z_trial)
+        r_new, jac_new, aux_new, ok = model(z + h)
         evaluations += 1
-        if ok:
-            args = (jnp.asarray(r_new), jnp.asarray(np.where(clipped, 0.0, jac_new)), trial)
-        else:
-            args = (jnp.full_like(r, jnp.inf), jnp.zeros_like(jac), trial)
-        y_before = np.asarray(y)
-        y, state, _ = step(solver, y, args, state)
-        accepted = ok and bool(np.array_equal(np.asarray(y), trial))
         cost_new = 0.5 * float(r_new @ r_new) if ok else math.inf
+        rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
+        accepted = ok and rho > 0
         history.append(
             dict(
                 iteration=iteration,
                 cost=cost_new,
                 accepted=accepted,
-                step=float(np.linalg.norm(trial - y_before)),
-                z=z_trial.tolist(),
+                step=float(np.linalg.norm(h)),
+                z=(z + h).tolist(),
                 simulation_ok=ok,
             )
         )
         if callback:
             callback(history[-1])
-        if accepted:
-            decrease = cost - cost_new
-            z, r, jac, aux, cost = z_trial, r_new, jac_new, aux_new, cost_new
-            jac_seen = np.asarray(args[1])
-        done, result = solver.terminate(_linearisation, y, args, {}, state, frozenset())
-        if result != optx.RESULTS.successful:
-            message = f"optimistix: {optx.RESULTS[result]}"
-            break
-        if bool(done):
-            converged, message = True, "step and residual change below tolerance"
-            break
-        if accepted and decrease < ftol * (cost + decrease):
+        if not accepted:
+            mu, nu = mu * nu, 2.0 * nu
+            continue
+        decrease = cost - cost_new
+        z, r, jac, aux, cost = z + h, r_new, jac_new, aux_new, cost_new
+        mu, nu = mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 2.0
+        if decrease < ftol * (cost + decrease):
             converged, message = True, "relative cost decrease below tolerance"
             break
-        if accepted and decrease < ctol:
+        if decrease < ctol:
             converged, message = True, "cost decrease below ctol (statistically negligible)"
             break
     info = dict(
@@ -520,6 +499,7 @@ def fit(
     starts: int = 0,
     seed: int = 0,
     callback: Callable | None = None,
+    optimiser: Callable | None = None,
     **simulate_options,
 ) -> FitResult:
     """Fit `parameters` of `scene` to `data`.
@@ -537,6 +517,8 @@ def fit(
       points plus the guess, evaluated as one batch on the first residual stage; LM starts
       from the best. 0 (default) starts from the guess.
     - `callback(entry)`: called after every LM trial step with a history entry.
+    - `optimiser`: the least-squares routine, with the signature and return value of
+      `levenberg_marquardt` (the default); for comparing optimisers on the same stages.
     - `ftol`, `ctol`: a stage stops when an accepted step lowers ½|r|² by less than `ftol`
       relative or `ctol` absolute (default 1e-3 when the noise levels are given, so the
       residuals are in noise units and ½ is one standard error; else 0).
@@ -556,14 +538,12 @@ def fit(
     model_initial = None
     if starts < 0:
         raise ValueError(f"starts = {starts!r} is invalid: it must be ≥ 0")
-    compiled = {}  # one compiled model per set of save times, shared by the stages
     comparisons = [Comparison(data, spec) for spec in specs]
+    longest = max(comparisons, key=lambda c: c.n_save)
+    # One compiled model for every stage (`Model`).
+    compiled = Model(scene, params, base, longest.names, longest.ts, control, simulate_options)
     for k, (spec, comparison) in enumerate(zip(specs, comparisons, strict=True)):
-        if comparison.n_save not in compiled:
-            compiled[comparison.n_save] = Model(
-                scene, params, base, comparison.names, comparison.ts, control, simulate_options
-            )
-        model = StageModel(compiled[comparison.n_save], comparison)
+        model = StageModel(compiled, comparison)
         if k == 0 and starts:
             candidates = np.vstack([z[None, :], latin_hypercube_starts(params, starts, seed)])
             costs = model.costs(candidates)
@@ -601,7 +581,7 @@ def fit(
             if callback:
                 callback(entry)
 
-        z, r, jac, aux, info = levenberg_marquardt(
+        z, r, jac, aux, info = (optimiser or levenberg_marquardt)(
             model,
             z,
             max_iterations=max_iterations,
