@@ -25,8 +25,7 @@ import time
 import numpy as np
 
 from jaxdeploy.batch import simulate_batch
-from jaxdeploy.fit import Measurements, ResidualSpec, load_measurements
-from jaxdeploy.fit._residuals import Comparison
+from jaxdeploy.fit import Comparison, Measurements, ResidualSpec, load_measurements
 from jaxdeploy.io import atomic_write_json, replace_block, run_metadata
 from jaxdeploy.scenes import DeployArray
 

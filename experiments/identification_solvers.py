@@ -37,7 +37,6 @@ os.environ.setdefault("EQX_ON_ERROR", "nan")  # cacheable programs (persistent c
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
-from _docblocks import replace_block  # noqa: E402
 
 from jaxdeploy.fit import (  # noqa: E402
     Comparison,
@@ -50,6 +49,7 @@ from jaxdeploy.fit import (  # noqa: E402
     onset_times,
     synthesize,
 )
+from jaxdeploy.io import replace_block  # noqa: E402
 from jaxdeploy.scenes import get_scene  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

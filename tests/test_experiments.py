@@ -20,8 +20,6 @@ KNOWN_DEBT = {
     "exudyn_per_step.py: jaxdeploy.benchmarks.exudyn_peer:_quiet",
     "step_profile.py: jaxdeploy.solvers.generalized_alpha:_apply_factor",
     "step_profile.py: jaxdeploy.solvers.generalized_alpha:_factor",
-    "identification_independent.py: jaxdeploy.fit._schedule:RTOL_FLOOR",
-    "identification_landscape.py: jaxdeploy.fit._residuals:Comparison",
 }
 
 

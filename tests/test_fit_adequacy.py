@@ -114,3 +114,28 @@ def test_a_fit_stopped_early_exits_4(tmp_path):
     assert main(argv) == 4
     report = json.loads((out / "fit.json").read_text())
     assert not report["converged"] and report["adequate"]
+
+
+def test_a_fit_that_matched_the_integration_error_exits_5(tmp_path, capsys):
+    """Data made by the model at a loose tolerance (rtol 1e-3) with a noise level far below
+    that run's integration error, fitted at the same tolerance: the fit reproduces the
+    discrete run (adequate) but the tolerance check at rtol 1e-4 moves the model by many
+    noise levels, so the fit is reported not reproducible (flag, console, exit 5)."""
+    scene = Pendulum()
+    loose = {"rtol": 1e-3, "atol": 1e-3}
+    t = np.linspace(0.0, 1.0, 201)
+    data = synthesize(scene, {"length": 0.8, "initial_angle": -0.6}, t, ["rod_theta"], seed=4,
+                      noise_fraction=1e-6, control=loose)  # fmt: skip
+    path = tmp_path / "loose.csv"
+    data.save(str(path))
+    out = tmp_path / "fit"
+    argv = ["fit", str(path), "--scene", "pendulum", "--params", "length=0.82:0.1:5",
+            "--set", "initial_angle=-0.6", "--rtol", "1e-3", "--atol", "1e-3",
+            "--out", str(out)]  # fmt: skip
+    assert main(argv) == 5
+    report = json.loads((out / "fit.json").read_text())
+    assert report["adequate"] and report["reproducible"] is False
+    tol = report["tolerance"]
+    assert tol["rms_model_change_over_sigma"] > tol["limit"] == 1.0
+    assert any(f.startswith("MODEL NOT REPRODUCIBLE") for f in report["flags"])
+    assert "reproducible: NO" in capsys.readouterr().out

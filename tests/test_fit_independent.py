@@ -39,10 +39,10 @@ def test_readme_example_recovers_the_reference_parameters(tmp_path, monkeypatch)
     _assert_recovered(main(argv), out)
 
 
-def _assert_recovered(status, out):
-    """Exit 0 (converged and adequate), every truth inside 3 reported standard errors,
-    clearance within 1 % and c_e within 3 %."""
-    assert status == 0
+def _assert_recovered(status, out, allowed=(0,)):
+    """Exit 0 (converged and adequate; or another status in `allowed`), every truth inside 3
+    reported standard errors, clearance within 1 % and c_e within 3 %."""
+    assert status in allowed
     report = json.loads((out / "fit.json").read_text())
     assert report["converged"] and report["adequate"]
     for name, est in report["estimates"].items():
@@ -66,14 +66,16 @@ def test_twelve_milliseconds_of_impacts_with_the_defaults(tmp_path, monkeypatch)
 @pytest.mark.slow
 def test_twelve_milliseconds_with_friction_fits_mu_too(tmp_path, monkeypatch):
     """μ = 0.01 with the reference's tanh-regularised Coulomb law: c, c_e and μ from 20 %
-    off."""
+    off. At the estimate this model need not be reproducible at the noise level (the
+    tolerance check has moved it by several noise levels: docs/identification.md), which the
+    command reports with exit 5; the estimates must reach the truth either way."""
     monkeypatch.chdir(ROOT)
     out = tmp_path / "fit"
     argv = ["fit", "examples/slider_crank_friction_slider_x_12ms.csv", "--scene",
             "slider_crank", "--scene-option", "friction_shape=tanh", "--params",
             "clearance=6e-4", "restitution=0.72", "friction_coefficient=0.012",
             "--out", str(out), "--quiet"]  # fmt: skip
-    _assert_recovered(main(argv), out)
+    _assert_recovered(main(argv), out, allowed=(0, 5))
 
 
 @pytest.mark.slow

@@ -11,7 +11,11 @@ Exit status (docs/identification.md):
 * 3 — the model does NOT explain the data (χ²/dof far above 1 or residuals not white): the
   estimates and their standard errors are not to be trusted, whether or not it converged;
 * 4 — the model explains the data but the optimiser stopped before its criterion was met
-  (e.g. --max-iterations reached): the estimates may still move.
+  (e.g. --max-iterations reached): the estimates may still move;
+* 5 — the model explains the data but is not reproducible at the noise level at the estimate
+  (the tolerance check: a 10x tighter model tolerance changes it by more than one noise level
+  RMS or would move an estimate by more than one standard error): the fit may have matched
+  the model's integration error.
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from ._args import (
 
 NAME = "fit"
 EXIT_OK, EXIT_FAILED, EXIT_REFUSED, EXIT_INADEQUATE, EXIT_NOT_CONVERGED = 0, 1, 2, 3, 4
+EXIT_NOT_REPRODUCIBLE = 5
 HELP = "fit scene parameters to measured channels (CSV/npz), with uncertainties"
 
 
@@ -420,8 +425,15 @@ def run(args) -> int:
         )
     say(f"wrote {out}/fit.json, history.csv, fit.npz, " + ", ".join(figures))
     say(f"converged: {'yes' if result.converged else 'NO'} ({result.message})")
+    if result.reproducible is False:
+        say(
+            "reproducible: NO -- at a 10x tighter tolerance the model at the estimate changes "
+            "by more than the noise; the fit may have matched its integration error"
+        )
     if result.adequate:
         say("adequate: yes (chi2/dof consistent with the stated noise, white residuals)")
+        if result.reproducible is False:
+            return EXIT_NOT_REPRODUCIBLE
         return EXIT_OK if result.converged else EXIT_NOT_CONVERGED
     say(
         "adequate: NO -- the model does not explain the data; the estimates may be biased "

@@ -13,10 +13,11 @@ from ._derivatives import central_differences, output_function, parameter_jacobi
 from ._fit import FitResult, fit, levenberg_marquardt, tolerance_check
 from ._parameters import FitParameter, check_not_ignored, make_parameters, parse_param_spec
 from ._residuals import Comparison, ResidualSpec
-from ._schedule import choose_tolerance, impact_horizons, onset_times, run_channels
+from ._schedule import RTOL_FLOOR, choose_tolerance, impact_horizons, onset_times, run_channels
 from ._synthetic import model_channels, synthesize
 
 __all__ = [
+    "RTOL_FLOOR",
     "Comparison",
     "check_not_ignored",
     "choose_tolerance",

@@ -55,6 +55,10 @@ CORRELATED = 0.95
 # optimiser crawling towards a bound it cannot cross slows down long before ZMAX.
 ZMAX = 20.0
 AT_BOUND = 15.0
+# `tolerance_check`: the fit is reported not reproducible when a 10x tighter model tolerance
+# changes the model by more than this many noise levels RMS, or would move an estimate by
+# more than this many standard errors.
+REPRODUCIBLE = 1.0
 
 
 @dataclass
@@ -99,6 +103,14 @@ class FitResult:
         """Whether the model explains the data: χ²/dof consistent with the stated noise and
         white residuals (`_adequacy`). Independent of `converged`."""
         return bool(self.adequacy.get("adequate", False))
+
+    @property
+    def reproducible(self) -> bool | None:
+        """Whether the model at the estimate is reproducible at the noise level (`tolerance_check`:
+        a 10x tighter tolerance changes it by at most `REPRODUCIBLE` noise levels RMS and
+        would move no estimate by more than `REPRODUCIBLE` standard errors); None when the
+        check did not run or could not (fixed step, tighter run failed)."""
+        return (self.tolerance or {}).get("reproducible")
 
     @property
     def inflation(self) -> float:
@@ -158,6 +170,16 @@ class FitResult:
             "MODEL DOES NOT EXPLAIN THE DATA: " + reason
             for reason in self.adequacy.get("reasons", [])
         ]
+        if self.reproducible is False:
+            tol = self.tolerance
+            out.append(
+                "MODEL NOT REPRODUCIBLE AT THE NOISE LEVEL: at rtol "
+                f"{tol['rtol_check']:g} instead of {tol['rtol']:g} the model at the estimate moves "
+                f"{tol['rms_model_change_over_sigma']:.3g} noise levels RMS and a refit would move "
+                f"an estimate by up to {tol['largest_estimate_change_in_standard_errors']:.3g} "
+                f"standard errors (limit {REPRODUCIBLE:g}): the fit matched the integration "
+                "error; give a tighter --rtol or fit a shorter record"
+            )
         out += [f"{n} is at its bound (the data push it beyond)" for n in self.at_bound]
         out += [
             f"{n} is not identified (std. error > {NOT_IDENTIFIED:.0%} of the value)"
@@ -181,6 +203,7 @@ class FitResult:
         return {
             "converged": self.converged,
             "adequate": self.adequate,
+            "reproducible": self.reproducible,
             "estimates": self.estimates,
             "standard_errors": self.standard_errors,
             "standard_errors_inflated": self.standard_errors_inflated,
@@ -646,7 +669,11 @@ def tolerance_check(result: FitResult, scene, fixed: Mapping, control) -> dict:
     and report (a) the RMS change of the channels in noise levels and (b) the change of the
     estimates a refit at the tighter tolerance would make, from one Gauss–Newton step with
     the optimum's Jacobian (Δθ = −J⁺ r_tight: the refit's first iterate, accurate when the
-    change is small), in standard errors. Stored in `result.tolerance` and returned."""
+    change is small), in standard errors. `reproducible` is false when either exceeds
+    `REPRODUCIBLE` (1 noise level RMS, 1 standard error): the model's integration error is
+    then not below the noise at the estimate, and the fit may have matched it (the change of
+    the estimates is a linearisation: far beyond one standard error read it as "large", not
+    as a number). Stored in `result.tolerance` and returned."""
     from ..batch import step_control
     from ._schedule import _scaled, model_difference, run_channels
 
@@ -668,8 +695,15 @@ def tolerance_check(result: FitResult, scene, fixed: Mapping, control) -> dict:
     r_tight = cmp_.residuals_np(y_tight)
     delta = -np.linalg.lstsq(result.jacobian, r_tight, rcond=None)[0]
     se = np.array([result.standard_errors[n] for n in result.names])
+    rms = model_difference(result.model_final, y_tight, cmp_)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        moves = np.abs(delta / se)
+    largest = float(np.max(np.where(np.isfinite(moves), moves, 0.0), initial=0.0))
     record.update(
-        rms_model_change_over_sigma=model_difference(result.model_final, y_tight, cmp_),
+        rms_model_change_over_sigma=rms,
+        largest_estimate_change_in_standard_errors=largest,
+        reproducible=bool(rms <= REPRODUCIBLE and largest <= REPRODUCIBLE),
+        limit=REPRODUCIBLE,
         reduced_chi2_tight=float(r_tight @ r_tight) / max(r_tight.size - len(se), 1),
         estimate_change={n: float(d) for n, d in zip(result.names, delta, strict=True)},
         estimate_change_in_standard_errors={
