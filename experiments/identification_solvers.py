@@ -18,8 +18,9 @@ A start "reached the truth" when the fit converged and every truth lies within 3
 standard errors of its estimate. Each fit's record (estimates, trial steps, model
 evaluations, wall and CPU time, load average) is kept in
 `docs/figures/identification_solvers/results.json` with the commit it ran at; rerunning at the
-same commit runs only what is missing (`--rerun` forces). Writes the "identification_solvers"
-block of docs/identification.md.
+same commit runs only what is missing (`--rerun` forces; `--reuse` keeps fits recorded at
+another commit, which the block then names, and runs nothing). Writes the
+"identification_solvers" block of docs/identification.md.
 
 Usage: `PYTHONPATH=. nice -n 10 python experiments/identification_solvers.py [--only NAME]`.
 """
@@ -245,7 +246,9 @@ def block(results, commit):
         "truth), with the command's defaults; *reached* = converged with every truth within "
         "3 reported standard errors. Trial steps and model evaluations (each a simulation "
         "with its forward-mode Jacobian; evaluations include none of the tolerance search) "
-        "are summed over the starts, as are the times (which include compiling).",
+        "are summed over the starts, as are the times. The first fit of a problem compiles the "
+        "model (the Marquardt loop runs first, so its times include that); the others load the "
+        "compiled program from the persistent cache.",
         "",
         "| problem | optimiser | starts reached | trial steps | evaluations | wall [s] "
         "| CPU [s] | load average |",
@@ -285,6 +288,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", action="append", default=[], help="run only these problems")
     parser.add_argument("--rerun", action="store_true", help="rerun fits already recorded")
+    parser.add_argument("--reuse", action="store_true", help="keep fits recorded at another commit")
     args = parser.parse_args()
     os.makedirs(OUT, exist_ok=True)
     # The command line's persistent cache (jaxdeploy fit uses the same folder by default).
@@ -294,14 +298,16 @@ def main() -> int:
                             text=True, check=True, cwd=ROOT).stdout.strip()  # fmt: skip
     path = os.path.join(OUT, "results.json")
     stored = json.load(open(path)) if os.path.exists(path) else {}
-    results = stored.get("results", {}) if stored.get("commit") == commit and not args.rerun else {}
+    keep = not args.rerun and (stored.get("commit") == commit or args.reuse)
+    results = stored.get("results", {}) if keep else {}
+    commit = stored.get("commit", commit) if keep and results else commit
     for name, problem in PROBLEMS.items():
         if args.only and name not in args.only:
             continue
         for i, start in enumerate(problem["starts"]):
             for opt in OPTIMISERS:
                 key = f"{name}/{opt}/{i}"
-                if key in results:
+                if key in results or args.reuse:  # --reuse: only rewrite the block
                     continue
                 print(f"{key}: start {start}", flush=True)
                 results[key] = run_one(problem, start, opt)
