@@ -10,10 +10,9 @@ here). Residuals and Jacobian are one compiled function, evaluated once per LM t
 The optimiser (`levenberg_marquardt`) is Levenberg–Marquardt with Marquardt's diagonal
 scaling and Nielsen's damping update (Madsen, Nielsen & Tingleff 2004, Alg. 3.16), a loop in
 Python around the compiled evaluation, so that every trial is reported (progress, loss
-history) and a failed simulation is a rejected step, not a NaN inside the optimiser. It stays
-rather than optimistix's `LevenbergMarquardt` (identity damping in the internal coordinates)
-because it reached the truth from more starts on our problems
-(`experiments/identification_solvers.py`, docs/identification.md).
+history) and a failed simulation is a rejected step, not a NaN inside the optimiser. Its
+comparison with optimistix's `LevenbergMarquardt` on our problems:
+`experiments/identification_solvers.py` (docs/identification.md).
 
 Rugged losses (impacts make the loss jump between basins: a guess 50 % off in restitution
 can sit in another basin) get a global first stage, `starts=N`: N points of a Latin hypercube
