@@ -1,4 +1,5 @@
-# One command each (see README): `make demo` runs the main job, `make test` the tests.
+# One command each (see README): `make demo` runs the main job, `make test` the tests,
+# `make bench` regenerates every performance page (docs/performance.md, docs/bench/).
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -9,7 +10,7 @@ $(BIN)/activate: pyproject.toml
 	$(BIN)/pip install --quiet -e ".[test]"
 	touch $(BIN)/activate
 
-.PHONY: demo test lint
+.PHONY: demo test lint bench
 demo: $(BIN)/activate
 	$(BIN)/jaxdeploy simulate --out results/demo --overwrite
 
@@ -17,3 +18,12 @@ test: $(BIN)/activate
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/pytest
+
+# Measures the committed code (refuses a dirty tree); ~20 min on 2 quiet cores. Run it on a
+# quiet machine: the page records the load average at the start and the end.
+$(VENV)/.bench-extra: pyproject.toml $(BIN)/activate
+	$(BIN)/pip install --quiet -e ".[bench]"
+	touch $@
+
+bench: $(VENV)/.bench-extra
+	$(BIN)/python -m benchmarks all

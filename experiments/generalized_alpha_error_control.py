@@ -22,8 +22,8 @@ import time
 
 import numpy as np
 
-from jaxdeploy.benchmarks.peers import SliderCrankNumpy
-from jaxdeploy.benchmarks.reference import WINDOW, eccentricity_error
+from benchmarks.peers import SliderCrankNumpy
+from benchmarks.reference import WINDOW, eccentricity_error
 from jaxdeploy.io import machine_description, replace_block
 from jaxdeploy.scenes import DeployArray, SliderCrank
 from jaxdeploy.simulation import simulate

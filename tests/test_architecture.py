@@ -31,7 +31,6 @@ FLOORS = {
     "fit": 7,
     "objectives": 7,
     "optimize": 7,
-    "benchmarks": 8,
     "commands": 8,
     "cli": 8,
 }

@@ -20,8 +20,7 @@ class Compiled(Exception):
 @pytest.fixture
 def nothing_runs(monkeypatch):
     """Replace every way a command reaches a simulation (single run, batch, sweep, design
-    problem, fit, benchmark reference) by `Compiled`."""
-    import jaxdeploy.benchmarks.work_precision
+    problem, fit) by `Compiled`."""
     import jaxdeploy.fit
     import jaxdeploy.optimize
     import jaxdeploy.simulation
@@ -34,7 +33,6 @@ def nothing_runs(monkeypatch):
     monkeypatch.setattr(jaxdeploy.sweep, "batch_function", forbidden)
     monkeypatch.setattr(jaxdeploy.optimize.DesignProblem, "__init__", forbidden)
     monkeypatch.setattr(jaxdeploy.fit, "fit", forbidden)
-    monkeypatch.setattr(jaxdeploy.benchmarks.work_precision, "benchmark_reference", forbidden)
     # Building an initial state assembles the mechanism (seconds); it comes after every check.
     from jaxdeploy.scenes import SCENES
 
@@ -57,7 +55,6 @@ def _bases(data):
         "sweep": ["sweep", "--scene", "pendulum", "--grid", "length=1,2", "--t-end", "0.1"],
         "optimize": ["optimize", "--param", "panel1_ra", "--steps", "1", "--quiet"],
         "fit": ["fit", data, "--scene", "pendulum", "--params", "length", "--quiet"],
-        "bench": ["bench", "work-precision", "slider_crank", "--quick"],
     }
 
 
@@ -105,7 +102,6 @@ NUMERIC = {
         "--dt-max": "pos",
         "--dt": "pos",
     },
-    "bench": {"--repeats": ("int", 1), "--t-end": "pos", "--budget": "pos"},
 }
 # Repeatable NAME=VALUE flags of each command, with a valid NAME.
 ASSIGNMENTS = {
@@ -113,7 +109,6 @@ ASSIGNMENTS = {
     "sweep": [("--set", "mass"), ("--grid", "initial_angle")],
     "optimize": [("--set", "restitution"), ("--start", "panel1_ra")],
     "fit": [("--set", "mass")],
-    "bench": [],
 }
 
 
@@ -168,18 +163,12 @@ def malformed(draw, command):
         flag = draw(st.sampled_from(sorted(NUMERIC[command])))
         return [flag, draw(_bad_value(NUMERIC[command][flag]))], defect
     if defect == "solver":
-        if command == "bench":
-            return ["--repeats", "0"], defect
         name = draw(_words.filter(lambda s: s not in ("generalized_alpha", "tsit5")))
         return ["--solver", name], defect
     if defect == "set unknown":
-        if command == "bench":
-            return ["--quick", "--zzset", "1"], defect
         name = draw(st.text(alphabet=string.ascii_lowercase, min_size=1, max_size=10))
         return ["--set", f"zz{name}=1"], defect
     if defect == "set malformed":
-        if command == "bench":
-            return ["--t-end", "-1"], defect
         return ["--set", draw(st.text(alphabet=string.ascii_lowercase, min_size=1))], defect
     if defect == "repeated":
         flag, name = draw(st.sampled_from(ASSIGNMENTS[command]))

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from jaxdeploy.benchmarks.peers import SliderCrankNumpy
-from jaxdeploy.benchmarks.reference import eccentricities
+from benchmarks.peers import SliderCrankNumpy
+from benchmarks.reference import eccentricities
 from jaxdeploy.scenes import Impact, Pendulum, SliderCrank
 from jaxdeploy.simulation import simulate
 from jaxdeploy.solvers import SOLVER_NAMES, solver_by_name

@@ -284,7 +284,7 @@ def test_modified_newton_error_is_negligible_against_the_step_error():
     h = 1e-6, 0.4 ms; first contact at 0.23 ms): the journal eccentricity of modified Newton
     differs from Newton proper's by less than 1 % of the time-discretisation error, estimated
     by Newton proper's step-halving difference |e(h) − e(h/2)|."""
-    from jaxdeploy.benchmarks.reference import eccentricities
+    from benchmarks.reference import eccentricities
 
     scene = SliderCrank()
     p = scene.resolve_params()

@@ -141,10 +141,10 @@ def test_stored_fixture_is_what_the_generator_writes(reference):
 
 def test_numpy_peer_with_the_classical_rule_matches_reference(reference):
     """The benchmark's numpy peer (absolute coordinates, Baumgarte-stabilised index-1 system,
-    `jaxdeploy.benchmarks.peers`) with its default classical rule and the minimal-coordinate
+    `benchmarks.peers`) with its default classical rule and the minimal-coordinate
     reference are two formulations of one model: x_s agrees to 1e-12 m over the first 2 ms
     (five impacts; measured 5e-14 m)."""
-    from jaxdeploy.benchmarks.peers import SliderCrankNumpy
+    from benchmarks.peers import SliderCrankNumpy
 
     scene, params = slider_crank_scene(0.0)
     state = scene.initial_state(params, scene.build(params))

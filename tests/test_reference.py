@@ -1,7 +1,7 @@
 """Reference solutions: converged (independent tight runs agree) and equal to an independent
 model (numpy right-hand side, exact contact events, scipy DOP853)."""
 
-from jaxdeploy.benchmarks.reference import reference_solution
+from benchmarks.reference import reference_solution
 
 T_END = 0.45e-3  # through the first impact (onset ≈ 0.23 ms, separation < 0.33 ms)
 

@@ -146,11 +146,29 @@ def parse_grid(items: list[str], fixed=()) -> dict[str, list[float]]:
     return grid
 
 
+def _distributed_from_environment() -> dict:
+    """`jax.distributed.initialize` arguments from `JAX_NUM_PROCESSES` and `JAX_PROCESS_ID`
+    when set (JAX itself reads only `JAX_COORDINATOR_ADDRESS` from the environment); unset,
+    JAX's cluster auto-detection (SLURM, Open MPI, …) supplies them."""
+    options = {}
+    for key, name in (("num_processes", "JAX_NUM_PROCESSES"), ("process_id", "JAX_PROCESS_ID")):
+        text = os.environ.get(name)
+        if text is not None:
+            try:
+                options[key] = int(text)
+            except ValueError:
+                raise ValueError(f"{name} = {text!r} is invalid: it must be an integer") from None
+    return options
+
+
 def run(args) -> int:
     import jax
 
     if args.distributed:
-        jax.distributed.initialize()
+        try:
+            jax.distributed.initialize(**_distributed_from_environment())
+        except ValueError as err:
+            return refuse(f"--distributed: {err}")
 
     from ..io import default_output_dir
     from ..scenes import SCENES, get_scene

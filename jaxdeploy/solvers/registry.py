@@ -1,4 +1,4 @@
-"""Solvers by name, for `simulate(..., solver="kvaerno5")`, the CLI and the benchmarks."""
+"""Solvers by name, for `simulate(..., solver="kvaerno5")` and the CLI."""
 
 from __future__ import annotations
 

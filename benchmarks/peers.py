@@ -216,8 +216,8 @@ def jitted_rhs(mechanism, baumgarte: float = BAUMGARTE):
     import jax
     import jax.numpy as jnp
 
-    from ..mechanism import RevoluteClearance
-    from ..solvers import stabilised_accelerations
+    from jaxdeploy.mechanism import RevoluteClearance
+    from jaxdeploy.solvers import stabilised_accelerations
 
     (index,) = mechanism.find(RevoluteClearance)
     joint = mechanism.elements[index]

@@ -20,33 +20,25 @@ is a C++ multibody code with a Python interface. The model, from its item librar
 
 That is 9 coordinates and 9 (ideal) or 7 (clearance) constraints, as jaxdeploy's model.
 
-**Contact law (b)** — the same as `jaxdeploy.mechanism.clearance` with the scene's
-`lankarani_nikravesh` Hertz law: with e = r_Pj − r_Pi (the connector's displacement, marker 1
-minus marker 0), |e| = sqrt(e·e + ε²) (ε = 1e-12 m), n = e/|e|, δ = |e| − c, δ̇ = ė·n,
+**Contact law (b)** — the classical Lankarani & Nikravesh (1990) law, eq. 17, with the
+scene's Hertz stiffness: with e = r_Pj − r_Pi (the connector's displacement, marker 1 minus
+marker 0), |e| = sqrt(e·e + ε²) (ε = 1e-12 m), n = e/|e|, δ = |e| − c, δ̇ = ė·n,
 
-    F_N = max(0, K δ^{3/2} (1 + χ δ̇ / v_eff)),  v_eff = sqrt(max(v⁻, δ̇)² + v_floor²)   (δ > 0)
+    F_N = max(0, K δ^{3/2} (1 + χ δ̇ / v_eff)),  v_eff = max(v⁻, v_floor)   (δ > 0)
 
 K = (4/3) E* sqrt(R_j R_b / c), E* = E / (2(1 − ν²)) (Hertz, same material; Flores &
-Ambrósio 2004), χ = 3(1 − c_e²)/4 (Lankarani & Nikravesh 1990), v_floor = 1e-4 m/s
-(`jaxdeploy.contact.damping.VELOCITY_FLOOR`). The force on the journal is −F_N n; the model
-applies it at the journal *centre*, ours at the contact point P_j + R_j n: in the frictionless
-case the force passes through both points along n, so the moments about every body's centre
-are identical (same for the bearing).
+Ambrósio 2004, eq. 20), χ = 3(1 − c_e²)/4, v⁻ the approach speed δ̇ at the onset of contact,
+held for the whole contact (the classical rule), v_floor = 1e-4 m/s (as jaxdeploy's
+`DEFAULT_IMPACT_VELOCITY_FLOOR`). The force on the journal is −F_N n; the model applies it at
+the journal *centre*, jaxdeploy at the contact point P_j + R_j n: without friction the force
+passes through both points along n, so the moments about every body's centre are identical.
 
 **v⁻ memory** — Exudyn has no memory variable for a user-function force, so it is kept in
 Python and updated by a `PostStepUserFunction` (called once after every accepted step, with
-the state at the step's end) with exactly the update of
-`RevoluteClearance.memory_after_step`: the eccentricity e over the step is the cubic Hermite
-interpolant of the end values (e, ė), and δ = |e| − c, δ̇ = ė·e/|e| on it; a contact beginning
-inside the step counts from the onset located on it, and v⁻ is the running maximum of δ̇ over
-the contact including the interpolant's interior peak; outside contact v⁻ holds max(δ̇, 0) of
-the last step end. (Not jaxdeploy's guard for steps too short to resolve e, ~1e-19 s, which
-fixed steps never take.) The force uses
-max(v⁻, δ̇) as ours. So the discrete model — not only the continuous one — is the same as
-jaxdeploy's for a given step sequence. Differences that remain: Exudyn's generalized-α
-(index 3, Arnold & Brüls 2007, Chung–Hulbert coefficients from the spectral radius ρ∞) uses
-its own Newton (modified Newton, residual-based tolerances, by default) and a finite-difference
-Jacobian of the user force; the constraint equations are its own (the same geometry).
+the state at the step's end): a step that ends in contact after starting out of it sets v⁻ to
+δ̇ at the onset, located on the cubic Hermite interpolant of the step's end values (e, ė)
+(Exudyn has no event location); v⁻ is then held until a step ends out of contact. Within the
+step in which a contact begins (memory still out of contact) the force uses max(δ̇, 0) as v⁻.
 
 **Step size** — Exudyn's generalized-α has no error-controlled step size (its
 `automaticStepSize` applies to the explicit solvers with error estimates, e.g. DOPRI5); only
@@ -119,7 +111,7 @@ _GRID, _NEWTON = 16, 10  # as jaxdeploy.mechanism._step_eccentricity
 class _EccentricityStep:
     """e over one step as the cubic Hermite interpolant of `(e₀, ė₀)`, `(e₁, ė₁)`, s ∈ [0, 1],
     with δ = |e|_ε − c and δ̇ = ė·e/|e|_ε on it; the onset (last upward crossing of δ = level)
-    and the peak of δ̇ bracketed on 17 samples and refined by a safeguarded Newton iteration
+    bracketed on 17 samples and refined by a safeguarded Newton iteration
     (`jaxdeploy.mechanism._step_eccentricity.StepEccentricity`, written again in plain Python
     for the post-step function):
 
@@ -167,25 +159,6 @@ class _EccentricityStep:
             newton = x - f / slope if slope > 0 else -1.0
             x = newton if lo < newton < hi else 0.5 * (lo + hi)
         return x
-
-    def max_rate(self, s_start):
-        """max of δ̇ over [s_start, 1]: the samples, refined by Newton on δ̈ = 0 around the
-        largest."""
-        samples = [s_start + (1.0 - s_start) * j / _GRID for j in range(_GRID + 1)]
-        rates = [self.rate(s) for s in samples]
-        k = max(range(_GRID + 1), key=rates.__getitem__)
-        lo, hi, x = samples[max(k - 1, 0)], samples[min(k + 1, _GRID)], samples[k]
-        for _ in range(_NEWTON):
-            u, u1, u2, u3 = self._derivatives(x)
-            r = self._radius(u)
-            a0, a1 = self._dot(u, u1), self._dot(u1, u1) + self._dot(u, u2)
-            a2 = 3.0 * self._dot(u1, u2) + self._dot(u, u3)
-            slope = a1 / r - a0**2 / r**3
-            curvature = a2 / r - 3.0 * a0 * a1 / r**3 + 3.0 * a0**3 / r**5
-            lo, hi = (x, hi) if slope > 0 else (lo, x)
-            newton = x - slope / curvature if curvature < 0 else -1.0
-            x = newton if lo < newton < hi else 0.5 * (lo + hi)
-        return max(rates[k], self.rate(x))
 
 
 @dataclass
@@ -352,8 +325,9 @@ class ExudynSliderCrank:
         """F_N(δ, δ̇) with the current memory (module docstring)."""
         if delta <= 0.0:
             return 0.0
-        v_running = max(self.memory["impact_velocity"], rate)
-        v_eff = math.sqrt(v_running * v_running + VELOCITY_FLOOR**2)
+        # Within the step in which the contact begins the memory has no onset yet: δ̇ stands in.
+        v_minus = self.memory["impact_velocity"] if self.memory["in_contact"] else max(rate, 0.0)
+        v_eff = max(v_minus, VELOCITY_FLOOR)
         return max(0.0, self.stiffness * delta**1.5 * (1.0 + self.chi * rate / v_eff))
 
     def _contact_force(self, mbs, t, item, displacement, velocity, stiffness, damping, offset):
@@ -372,14 +346,15 @@ class ExudynSliderCrank:
 
         esym = self.exu.symbolic
         v_minus = esym.Real(f"vMinus{id(self)}", 0.0)
+        held = esym.Real(f"inContact{id(self)}", 0.0)  # 1 in contact: v⁻ held, else δ̇
         stiffness, chi, clearance = self.stiffness, self.chi, self.clearance
 
         def force(mbs, t, item, u, v, k, d, offset):
             norm = esym.sqrt(u[0] * u[0] + u[1] * u[1] + ECCENTRICITY_SMOOTHING**2)
             n0, n1 = u[0] / norm, u[1] / norm
             rate = v[0] * n0 + v[1] * n1
-            running = esym.max(v_minus, rate)
-            v_eff = esym.sqrt(running * running + VELOCITY_FLOOR**2)
+            v_m = held * v_minus + (1.0 - held) * esym.max(rate, 0.0)
+            v_eff = esym.max(v_m, VELOCITY_FLOOR)
             inside = esym.max(norm - clearance, 0.0)
             fn = esym.max(0.0, stiffness * inside * esym.sqrt(inside) * (1.0 + chi * rate / v_eff))
             return [fn * n0, fn * n1, 0.0]
@@ -392,11 +367,12 @@ class ExudynSliderCrank:
         )
         self.mbs.SetObjectParameter(self.contact_object, "springForceUserFunction", function)
         # Both must outlive the solver (Exudyn keeps a reference to the expression tree only).
-        self._symbolic = (v_minus, function)
+        self._symbolic = (v_minus, function, held)
 
     def _memory_changed(self):
         if self.force_function == "symbolic":
             self._symbolic[0].SetValue(float(self.memory["impact_velocity"]))
+            self._symbolic[2].SetValue(1.0 if self.memory["in_contact"] else 0.0)
 
     def eccentricity(self, q, v):
         """e and ė from node coordinates (rod small end minus slider centre)."""
@@ -422,7 +398,8 @@ class ExudynSliderCrank:
         self._memory_changed()
 
     def _after_step(self, mbs, t):
-        """`RevoluteClearance.memory_after_step` on the accepted step that ended at t."""
+        """The classical rule's memory after the accepted step that ended at t (module
+        docstring): v⁻ = δ̇ at an onset inside the step, held in contact, 0 out of it."""
         current = self.exu.ConfigurationType.Current
         q = mbs.systemData.GetODE2Coordinates(configuration=current)
         v = mbs.systemData.GetODE2Coordinates_t(configuration=current)
@@ -431,21 +408,15 @@ class ExudynSliderCrank:
         m = self.memory
         step = t - m["time"]
         now_in = delta > 0.0
-        # The interpolant matters only for a step that is in contact at one of its ends (else
-        # v⁻ = max(δ̇, 0) at the end): skipping it elsewhere keeps the peer's cost its own.
-        if step > 0.0 and (m["in_contact"] or now_in):
+        if now_in and not m["in_contact"] and step > 0.0:
             path = _EccentricityStep(
                 m["eccentricity"], m["eccentricity_rate"], e, e_dot, step, self.clearance
             )
-            s_on = 0.0 if m["in_contact"] else path.crossing(0.0)
-            held = m["impact_velocity"] if m["in_contact"] else 0.0
-            if m["in_contact"] and not now_in:  # a contact ended inside this step
-                self.contact_history.append((t, max(held, path.max_rate(0.0))))
-            v_minus = max(held, path.max_rate(s_on)) if now_in else rate
-            m["impact_velocity"] = max(v_minus, 0.0)
-            m["in_contact"] = now_in
-        elif step > 0.0:
-            m["impact_velocity"] = max(rate, 0.0)
+            m["impact_velocity"] = max(path.rate(path.crossing(0.0)), 0.0)
+            self.contact_history.append((t, m["impact_velocity"]))
+        elif not now_in:
+            m["impact_velocity"] = 0.0
+        m["in_contact"] = now_in
         m["penetration"], m["penetration_rate"], m["time"] = delta, rate, t
         m["eccentricity"], m["eccentricity_rate"] = e, e_dot
         self._memory_changed()

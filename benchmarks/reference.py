@@ -35,15 +35,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..io import atomic_write_json, atomic_write_npz
-from ..mechanism import RevoluteClearance
-from ..scenes import get_scene
-from ..simulation import simulate
-
-# The Exudyn peer keeps v⁻ as the running maximum, so the reference and the work–precision runs
-# use that rule until it moves to the classical one; the numpy model (the evidence below) is
-# built with whichever rule the scene uses.
-PEER_SCENE_OPTIONS = {"slider_crank": {"impact_velocity_rule": "running_max"}}
+from jaxdeploy.io import atomic_write_json, atomic_write_npz
+from jaxdeploy.mechanism import RevoluteClearance
+from jaxdeploy.scenes import get_scene
+from jaxdeploy.simulation import simulate
 
 # End of the reference window [s]: slider_crank's first six impacts (the first onset is at
 # 0.23 ms); deploy_array's first half second.
@@ -154,7 +149,7 @@ def reference_solution(
     **Returns:** a `Reference`; `evidence` lists, for each check run, its method, tolerance and
     the differences `window`/`full` to the reference.
     """
-    scene = get_scene(scene_name, **PEER_SCENE_OPTIONS.get(scene_name, {}))
+    scene = get_scene(scene_name)
     p = scene.resolve_params(params)
     mech = scene.build(p)
     s0 = scene.initial_state(p, mech)

@@ -1,0 +1,130 @@
+"""`python -m benchmarks` (from a source checkout; `make bench` runs `all`).
+
+* `all [--quick] [--out DIR] [--allow-dirty]`: every measurement, each in a fresh process, then
+  the page `DIR/performance.md` with `DIR/bench/work_precision.{json,png}` and
+  `DIR/bench/targets.json` (DIR: `docs`, or `results/bench_quick` with `--quick`).
+* `part NAME --json FILE [--quick]`: one measurement (work-precision, batch, ceiling, gradient,
+  simulate) into FILE; used by `all`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+# The code whose changes make the page stale (tests/test_page_freshness.py).
+MEASURES = [
+    "benchmarks",
+    "jaxdeploy/analysis",
+    "jaxdeploy/batch.py",
+    "jaxdeploy/cli.py",
+    "jaxdeploy/commands/simulate.py",
+    "jaxdeploy/contact",
+    "jaxdeploy/lanes.py",
+    "jaxdeploy/mechanism",
+    "jaxdeploy/scenes",
+    "jaxdeploy/simulation.py",
+    "jaxdeploy/solvers",
+    "tests/data/slider_crank_reference.npz",
+]
+PINNED = ("work-precision", "batch", "ceiling", "gradient")  # one core for both sides
+PARTS = ("work-precision", "batch", "ceiling", "gradient", "simulate")
+CUT = [
+    "Work–precision over the first 4 ms of slider_crank only (the reference fixture's fine "
+    "grid), not two revolutions, and not deploy_array (its implicit configurations take hours).",
+    "Batch over 4 ms of slider_crank; one-at-a-time cost is the mean of 8 cases, not 256; no "
+    "`lanes` or `group_size` variants, no two-core batch.",
+    "Gradient over 0.2 s of deploy_array, not its 2 s; no check against central differences.",
+    "No Andrews squeezer case (not yet a scene).",
+]
+
+
+def _part(name: str, quick: bool) -> dict:
+    from . import targets
+
+    if name in PINNED and hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    if name == "work-precision":
+        from .work_precision import measure
+
+        return measure(quick=quick, repeats=1 if quick else 3)
+    if name == "batch":
+        return targets.batch(cases=16 if quick else 256, singles=2 if quick else 8)
+    if name == "ceiling":
+        return targets.solve_ceiling(cases=16 if quick else 256, iterations=200 if quick else 2000)
+    if name == "gradient":
+        return targets.gradient(t_end=0.02 if quick else 0.2, repeats=1 if quick else 2)
+    if name == "simulate":
+        return targets.simulate_cold_warm()
+    raise ValueError(f"part {name!r} is invalid; valid: {', '.join(PARTS)}")
+
+
+def _all(args) -> int:
+    from jaxdeploy.io import atomic_write_bytes, atomic_write_json
+
+    from . import page, provenance
+    from .work_precision import plot
+
+    out = args.out or ("results/bench_quick" if args.quick else "docs")
+    try:
+        record = provenance.start(MEASURES, allow_dirty=args.allow_dirty)
+    except RuntimeError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    os.makedirs(os.path.join(out, "bench"), exist_ok=True)
+    results, began = {}, time.perf_counter()
+    parts = [p for p in PARTS if not (args.quick and p == "simulate")]
+    for name in parts:
+        path = os.path.join(out, "bench", f".{name}.json")
+        print(f"[{time.perf_counter() - began:6.0f} s] {name} ...", flush=True)
+        command = [sys.executable, "-m", "benchmarks", "part", name, "--json", path]
+        if subprocess.run(command + (["--quick"] if args.quick else [])).returncode != 0:
+            print(f"error: part {name} failed (its output is above)", file=sys.stderr)
+            return 1
+        with open(path, encoding="utf-8") as f:
+            results[name] = json.load(f)
+        os.remove(path)
+    record = provenance.finish(record)
+    record["wall_s"] = time.perf_counter() - began
+    wp = results.pop("work-precision")
+    atomic_write_json(os.path.join(out, "bench", "work_precision.json"), wp)
+    atomic_write_json(os.path.join(out, "bench", "targets.json"), results)
+    plot(wp, os.path.join(out, "bench", "work_precision.png"))
+    cut = CUT + (["--quick: a handful of configurations, short horizons, no simulate."]
+                 if args.quick else [])  # fmt: skip
+    command = "make bench" if not args.quick else "python -m benchmarks all --quick"
+    text = page.render(record, wp, {**results, "simulate": results.get("simulate")},
+                       command=command, cut=cut)  # fmt: skip
+    atomic_write_bytes(os.path.join(out, "performance.md"), text.encode("utf-8"))
+    print(f"wrote {out}/performance.md in {record['wall_s']:.0f} s "
+          f"(load {record['load_start_1min']:.1f} → {record['load_end_1min']:.1f})")  # fmt: skip
+    return 0
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    every = sub.add_parser("all", help="every measurement, then the page")
+    every.add_argument("--quick", action="store_true", help="few configurations, short runs")
+    every.add_argument("--out", default=None, help="folder of the page (default docs)")
+    every.add_argument("--allow-dirty", action="store_true",
+                       help="measure uncommitted code (the page is marked dirty)")  # fmt: skip
+    one = sub.add_parser("part", help="one measurement into a JSON file")
+    one.add_argument("name", choices=PARTS)
+    one.add_argument("--json", required=True)
+    one.add_argument("--quick", action="store_true")
+    args = parser.parse_args(argv)
+    if args.command == "all":
+        return _all(args)
+    from jaxdeploy.io import atomic_write_json
+
+    atomic_write_json(args.json, _part(args.name, args.quick))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

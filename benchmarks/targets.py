@@ -1,0 +1,153 @@
+"""The measurements behind issue 21's targets that are not work–precision rows: batch
+throughput with the XLA small-solve ceiling, gradient against forward cost, and the cold and
+warm `jaxdeploy simulate` of deploy_array. Each function returns a JSON-able dict with its
+setting; the ratios are formed in `page.py`.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+
+def _timed(fn, *args):
+    start = time.perf_counter()
+    out = fn(*args)
+    import jax
+
+    jax.block_until_ready(out)
+    return time.perf_counter() - start, out
+
+
+def batch(cases: int = 256, singles: int = 8, t_end: float = 4e-3) -> dict:
+    """Per-simulation cost of slider_crank (the scene's default step control) as one vmap of
+    `cases` cases against one at a time (`singles` of them, the mean), restitution spread over
+    0.8–0.99. Run in a process pinned to one core, so both use the same hardware."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxdeploy.batch import batch_function, run_scene
+    from jaxdeploy.scenes import SliderCrank
+
+    scene = SliderCrank()
+    shared = dict(scene.resolve_params())
+    restitution = np.linspace(0.8, 0.99, cases)
+    shared.pop("restitution")
+    ts = jnp.linspace(0.0, t_end, 401)
+    vmapped = batch_function(scene, ("restitution",), shared, t_end, ts)
+    compile_vmap, _ = _timed(vmapped, (jnp.asarray(restitution),))
+    warm_vmap, trajectory = _timed(vmapped, (jnp.asarray(restitution),))
+    compile_vmap -= warm_vmap
+    steps = np.asarray(trajectory.stats["num_accepted_steps"])
+
+    one = jax.jit(lambda e: run_scene(scene, {**shared, "restitution": e}, t_end, ts=ts))
+    picks = restitution[np.linspace(0, cases - 1, singles).astype(int)]
+    compile_one, _ = _timed(one, picks[0])
+    walls = [_timed(one, e)[0] for e in picks]
+    compile_one -= walls[0]
+    per_single = float(np.mean(walls))
+    return {
+        "scene": "slider_crank",
+        "t_end_s": t_end,
+        "cases": cases,
+        "singles_timed": singles,
+        "vmap_warm_s": warm_vmap,
+        "vmap_per_simulation_s": warm_vmap / cases,
+        "vmap_compile_s": compile_vmap,
+        "one_at_a_time_per_simulation_s": per_single,
+        "one_at_a_time_compile_s": compile_one,
+        "speedup_per_simulation": per_single / (warm_vmap / cases),
+        "steps_min_max": [int(steps.min()), int(steps.max())],
+    }
+
+
+def solve_ceiling(cases: int = 256, size: int = 16, iterations: int = 2000) -> dict:
+    """XLA's own gain from vmapping small dense solves: `iterations` chained `size`×`size`
+    solves (slider_crank's 9 coordinates + 7 constraints), one system against `cases` of them
+    vmapped, on the same core. Speed-up = cases × t_one / t_vmapped."""
+    import jax
+    import jax.numpy as jnp
+
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal((cases, size, size)) + size * np.eye(size)
+    b = rng.standard_normal((cases, size))
+
+    def chain(a, b):
+        def body(_, x):
+            return jnp.linalg.solve(a, b + 1e-3 * x)
+
+        return jax.lax.fori_loop(0, iterations, body, b)
+
+    single, many = jax.jit(chain), jax.jit(jax.vmap(chain))
+    _timed(single, a[0], b[0])
+    _timed(many, a, b)
+    t_one = min(_timed(single, a[0], b[0])[0] for _ in range(3))
+    t_many = min(_timed(many, a, b)[0] for _ in range(3))
+    return {
+        "size": size,
+        "cases": cases,
+        "iterations": iterations,
+        "one_s": t_one,
+        "vmapped_s": t_many,
+        "speedup_per_solve": cases * t_one / t_many,
+    }
+
+
+GRADIENT_WRT = ("restitution", "friction_coefficient", "panel1_clearance", "panel2_clearance")
+
+
+def gradient(t_end: float = 0.2, repeats: int = 2) -> dict:
+    """A deploy_array loss (mean square of panel 2's tip acceleration over `t_end`, 201
+    samples; the scene's default step control) and its reverse-mode gradient with respect to
+    `GRADIENT_WRT`, steps replayed as `jaxdeploy.fit` does; warm walls, best of `repeats`."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxdeploy.batch import run_scene
+    from jaxdeploy.scenes import DeployArray
+
+    scene = DeployArray()
+    base = scene.resolve_params()
+    x0 = {k: jnp.asarray(base[k]) for k in GRADIENT_WRT}
+
+    def loss(x, replay):
+        params = {**base, **x}
+        traj = run_scene(scene, params, t_end, n_save=201, replay_steps=replay)
+        channels = scene.channels(scene.build(params), traj)
+        return jnp.mean(channels["panel2_tip_ay"] ** 2)
+
+    forward = jax.jit(lambda x: loss(x, False))
+    grad = jax.jit(jax.grad(lambda x: loss(x, True)))
+    out = {"scene": "deploy_array", "t_end_s": t_end, "wrt": list(GRADIENT_WRT)}
+    for name, fn in (("forward", forward), ("gradient", grad)):
+        first, value = _timed(fn, x0)
+        warm = min(_timed(fn, x0)[0] for _ in range(repeats))
+        out[name] = {"compile_s": first - warm, "warm_s": warm}
+        if name == "gradient":
+            out["gradient_values"] = {k: float(v) for k, v in value.items()}
+    out["ratio"] = out["gradient"]["warm_s"] / out["forward"]["warm_s"]
+    return out
+
+
+def simulate_cold_warm(scene: str = "deploy_array") -> dict:
+    """Wall time of `jaxdeploy simulate SCENE` (the scene's defaults, the whole command:
+    import, scene build, compile, run, ideal reference, files) twice in fresh processes with
+    a new, empty persistent compilation cache: cold (nothing cached), then warm."""
+    with tempfile.TemporaryDirectory() as tmp:
+        env = {**os.environ, "JAXDEPLOY_CACHE_DIR": os.path.join(tmp, "cache")}
+        walls = []
+        for run in ("cold", "warm"):
+            command = [sys.executable, "-c", "import sys; from jaxdeploy.cli import main; "
+                       "sys.exit(main())", "simulate", scene, "--out",
+                       os.path.join(tmp, run), "--quiet"]  # fmt: skip
+            start = time.perf_counter()
+            done = subprocess.run(command, env=env, capture_output=True, text=True)
+            walls.append(time.perf_counter() - start)
+            if done.returncode != 0:
+                raise RuntimeError(f"jaxdeploy simulate failed ({run}): {done.stderr[-2000:]}")
+    return {"scene": scene, "cold_s": walls[0], "warm_s": walls[1]}
