@@ -60,6 +60,16 @@ def render(record, wp, targets, *, command, cut) -> str:
     levels = work_precision_targets(rows)
     lines = ["# Performance (generated: do not edit; `make bench` rewrites this page)", ""]
     lines += [header(record, command), ""]
+    lines += [
+        "How to rerun: `make bench` in a source checkout (a clean tree; it installs the `bench` "
+        "extra: scipy, exudyn), or `python -m benchmarks all` in an environment that has them; "
+        "`python -m benchmarks all --quick` tries the whole chain in a few minutes and writes "
+        "to results/bench_quick instead. The benchmarks live in `benchmarks/` at the top of "
+        "the checkout, not in the installed package. `tests/test_page_freshness.py` fails once "
+        "a commit after the one above changes a measured path: rerun `make bench` then. "
+        f"This run took {record['wall_s'] / 60:.1f} min.",
+        "",
+    ]
     lines += ["## What this run leaves out to fit its budget", ""]
     lines += [f"* {c}" for c in cut] + [""]
 

@@ -82,7 +82,7 @@ class SliderCrankPeer:
     def rhs(self, t, y, v_minus):
         phi, x, dphi, dx = y
         th = self.w * t
-        ax, ay = -self.w**2 * self.r * math.cos(th), -self.w**2 * self.r * math.sin(th)
+        ax, ay = -(self.w**2) * self.r * math.cos(th), -(self.w**2) * self.r * math.sin(th)
         cp, sp = math.cos(phi), math.sin(phi)
         torque = -self.m_r * 0.5 * self.l * (-sp * ax + cp * ay + self.g * cp)
         slider = 0.0

@@ -89,8 +89,13 @@ def configurations(quick: bool, exudyn: bool) -> list[Config]:
     if exudyn:
         for force, steps in exu.items():
             out += [
-                Config(f"Exudyn generalized-α ({force} force)", "exudyn", "generalized_alpha",
-                       dt=h, force_function=force)  # fmt: skip
+                Config(
+                    f"Exudyn generalized-α ({force} force)",
+                    "exudyn",
+                    "generalized_alpha",
+                    dt=h,
+                    force_function=force,
+                )  # fmt: skip
                 for h in steps
             ]
     return out
@@ -200,8 +205,10 @@ def measure(quick: bool = False, repeats: int = 3, log=print, root: str = ".") -
         error = float(np.max(np.abs(x - x_ref))) if status == "ok" else math.nan
         row = Row(cfg.family, cfg.setting, cfg.kind, error, compile_s, first, warm, steps, status)
         rows.append(row)
-        log(f"  [{number}/{len(todo)}] {cfg.family:38s} {cfg.setting:13s} err {error:9.2e} m "
-            f"compile {compile_s:6.2f} s first {first:7.3f} s warm {warm:7.3f} s {status}")  # fmt: skip
+        log(
+            f"  [{number}/{len(todo)}] {cfg.family:38s} {cfg.setting:13s} err {error:9.2e} m "
+            f"compile {compile_s:6.2f} s first {first:7.3f} s warm {warm:7.3f} s {status}"
+        )
     return {
         "error_measure": "max |x_s - x_ref| [m] over the 4001 saved times 0..4 ms",
         "reference": REFERENCE,

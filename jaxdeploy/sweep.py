@@ -330,12 +330,15 @@ def sweep(
             "failed": int(np.sum(arrays["result"] != 0)),
             "wall_time_s": time.perf_counter() - began,
         }
+        # Every process holds the gathered chunk and keeps the same manifest (so each returns
+        # the same account of the sweep); only process 0 writes.
+        if writer and not os.path.exists(manifest_path):  # first chunk: define the sweep first
+            atomic_write_json(manifest_path, manifest)
         if writer:
-            if not os.path.exists(manifest_path):  # the sweep's first chunk: define it first
-                atomic_write_json(manifest_path, manifest)
             atomic_write_npz(os.path.join(out_dir, record["file"]), **arrays)
-            manifest["chunks"].append(record)
-            manifest["chunks"].sort(key=lambda c: c["index"])
+        manifest["chunks"].append(record)
+        manifest["chunks"].sort(key=lambda c: c["index"])
+        if writer:
             atomic_write_json(manifest_path, manifest)
         if bar is not None:
             bar.update(n)

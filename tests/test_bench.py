@@ -87,3 +87,49 @@ def test_dirty_tree_is_refused(tmp_path):
         provenance.start(["code.py"], root=str(tmp_path))
     record = provenance.start(["code.py"], allow_dirty=True, root=str(tmp_path))
     assert record["dirty"] is True
+
+
+def test_page_renders_every_target_with_its_verdict():
+    rows = [
+        _row("jaxdeploy", 1e-6, 0.2, 5.0, "jaxdeploy generalized-α fixed", "h=1e-06 s", 4000),
+        _row("exudyn", 1e-6, 0.5, 0.6, "Exudyn generalized-α (python force)", "h=1e-06 s", 4000),
+        _row("scipy", 1e-7, 0.4, 0.4, "scipy LSODA"),
+    ]
+    wp = {"rows": rows, "error_measure": "max |x_s - x_ref|", "reference": "ref.npz",
+          "exudyn": "1.13", "repeats": 3}  # fmt: skip
+    targets = {
+        "batch": dict(
+            cases=256,
+            speedup_per_simulation=1.5,
+            one_at_a_time_per_simulation_s=0.1,
+            vmap_per_simulation_s=0.066,
+            t_end_s=4e-3,
+            vmap_warm_s=17.0,
+            vmap_compile_s=9.0,
+            steps_min_max=[300, 400],
+            singles_timed=8,
+            one_at_a_time_compile_s=8.0,
+        ),  # fmt: skip
+        "ceiling": dict(
+            size=16, cases=256, speedup_per_solve=2.0, iterations=2000, one_s=0.01, vmapped_s=1.28
+        ),  # fmt: skip
+        "gradient": dict(
+            t_end_s=0.2,
+            ratio=4.0,
+            wrt=["restitution"],
+            gradient={"warm_s": 4.0, "compile_s": 30.0},
+            forward={"warm_s": 1.0, "compile_s": 10.0},
+        ),  # fmt: skip
+        "simulate": dict(scene="deploy_array", cold_s=30.0, warm_s=4.0),
+    }
+    record = provenance.finish(provenance.start(["benchmarks"], allow_dirty=True))
+    record["wall_s"] = 600.0
+    text = page.render(record, wp, targets, command="make bench", cut=["nothing"])
+    assert provenance.read(text)["commit"] == record["commit"]
+    assert "| batch: one at a time / 256-case vmap, per simulation | 1.50×" in text
+    assert "missed: 2× short" in text  # batch 1.5 against ≥ 3
+    assert "reaches 75% of it" in text  # 1.5 / 2.0 of the XLA ceiling
+    assert "| gradient / forward" in text and "missed: 1.3× the goal" in text
+    assert "≤ 15 s | missed: 2× the goal" in text and "≤ 5 s | met" in text
+    assert "generalized-α step / Exudyn generalized-α (python force) step" in text  # 0.4
+    assert "| 0.40 | ≤ 0.3 | missed: 1.3× the goal |" in text

@@ -39,13 +39,18 @@ def test_sweep_as_two_processes_loses_and_duplicates_no_case(tmp_path):
     env["JAX_NUM_PROCESSES"] = "2"
     out = tmp_path / "two"
     processes = [
-        subprocess.Popen(_command(out, "--distributed"), env={**env, "JAX_PROCESS_ID": str(i)},
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
+        subprocess.Popen(
+            _command(out, "--distributed"),
+            env={**env, "JAX_PROCESS_ID": str(i)},
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
         for i in range(2)
     ]
-    for i, proc in enumerate(processes):
-        _, err = proc.communicate(timeout=900)
-        assert proc.returncode == 0, f"process {i}: {err[-3000:]}"
+    errors = [proc.communicate(timeout=900)[1] for proc in processes]
+    report = "\n".join(f"process {k}: {e[-2000:]}" for k, e in enumerate(errors))
+    assert all(proc.returncode == 0 for proc in processes), report
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["process_count"] == 2 and len(manifest["devices"]) == 2
     assert manifest["n_cases"] == 9 and len(manifest["chunks"]) == 5
