@@ -15,11 +15,6 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 EXPERIMENTS = ROOT / "experiments"
 
 KNOWN_DEBT = {
-    "batch_throughput.py: jaxdeploy.batch:_stack_cases",
-    "batch_throughput.py: jaxdeploy.sweep:_policy_options",
-    "exudyn_per_step.py: jaxdeploy.benchmarks.exudyn_peer:_quiet",
-    "step_profile.py: jaxdeploy.solvers.generalized_alpha:_apply_factor",
-    "step_profile.py: jaxdeploy.solvers.generalized_alpha:_factor",
 }
 
 
