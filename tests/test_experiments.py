@@ -14,8 +14,7 @@ import pathlib
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 EXPERIMENTS = ROOT / "experiments"
 
-KNOWN_DEBT = {
-}
+KNOWN_DEBT: set[str] = set()
 
 
 def _private(name: str) -> bool:
