@@ -18,7 +18,7 @@ import os
 
 import numpy as np
 
-from jaxdeploy.analysis.contact_forces import clearance_joint_history
+from jaxdeploy.analysis import clearance_joint_history
 from jaxdeploy.io import atomic_write_bytes, code_revision
 from jaxdeploy.scenes import DeployArray, SliderCrank
 from jaxdeploy.simulation import simulate

@@ -151,7 +151,7 @@ def algorithmic_damping(rho_inf, omega_h):
     maps (x, v, a) by
     x₁ = x₀ + h v₀ + h² ((½ − β) a₀ + β a₁),  v₁ = v₀ + h ((1 − γ) a₀ + γ a₁),
     (1 − α_m) a₁ + α_m a₀ = −ω² ((1 − α_f) x₁ + α_f x₀);  λ its complex eigenvalue (h = 1)."""
-    from jaxdeploy.solvers.generalized_alpha import chung_hulbert
+    from jaxdeploy.solvers import chung_hulbert
 
     cf = chung_hulbert(rho_inf)
     w2 = omega_h**2
