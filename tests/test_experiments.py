@@ -4,15 +4,20 @@ Every `experiments/*.py` may import `jaxdeploy`, the names in `jaxdeploy.__all__
 public names of its public modules, but nothing private: no module or name of jaxdeploy that
 starts with an underscore (if an experiment needs one, the API is missing something).
 
-`KNOWN_DEBT` lists the private imports that exist today in scripts other owners are moving
-(out to `benchmarks/`, or into the package); delete a line when its import is gone. A
-violation not listed fails."""
+`KNOWN_DEBT` lists private imports tolerated for now (none today); a violation not listed
+fails.
+
+And experiments stay studies, not a second package: their Python lines are at most
+`MAX_SHARE` of the lines of `jaxdeploy/`, `tests/` and `experiments/` together. The top-level
+`benchmarks/` counts on neither side: it is not experiments, and counting it in the total
+would let a growing benchmark suite hide growing experiments."""
 
 import ast
 import pathlib
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 EXPERIMENTS = ROOT / "experiments"
+MAX_SHARE = 0.20  # issue 23 item 5
 
 KNOWN_DEBT: set[str] = set()
 
@@ -64,4 +69,17 @@ def test_experiments_use_the_public_api_only():
     new = sorted(found - KNOWN_DEBT)
     assert not new, (
         "experiments import private jaxdeploy names (use the public API):\n" + "\n".join(new)
+    )
+
+
+def _python_lines(folder: pathlib.Path) -> int:
+    return sum(len(p.read_text(encoding="utf-8").splitlines()) for p in folder.rglob("*.py"))
+
+
+def test_experiments_are_at_most_a_fifth_of_the_code():
+    lines = {name: _python_lines(ROOT / name) for name in ("jaxdeploy", "tests", "experiments")}
+    share = lines["experiments"] / sum(lines.values())
+    assert share <= MAX_SHARE, (
+        f"experiments/ is {share:.1%} of the Python lines ({lines}); move shared logic into "
+        "the package and verification into tests/"
     )
