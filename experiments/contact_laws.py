@@ -1,11 +1,11 @@
-"""Figures and the restitution table for docs/contact.md, from the public contact API.
+"""Figures for docs/contact.md, from the public contact API (the effective restitution of the
+damped laws is measured by experiments/restitution_table.py, docs/restitution.md).
 
 Writes into docs/figures/:
 * contact_elastic.png      F_e(δ) and k_d(δ) for Ra 0.8/1.6/3.2 µm against plain Hertz
                            (steel hinge pin R_j = 5 mm, c = 0.05 mm);
 * contact_friction.png     the friction laws' F_T/(μ F_N) against sliding speed;
 * contact_damping.png      force–penetration hysteresis of the damped laws in a one-body impact;
-* contact_restitution.md   effective against nominal restitution of each damped law.
 
 Run: .venv/bin/python experiments/contact_laws.py
 """
@@ -146,35 +146,12 @@ def damping_figure(stiffness, mass=0.2, v0=0.1):
     plt.close(fig)
 
 
-def restitution_table(stiffness, mass=0.2, v0=0.1):
-    nominal = (0.3, 0.5, 0.7, 0.9, 0.95)
-    lines = [
-        "| law | " + " | ".join(f"c_e = {c}" for c in nominal) + " |",
-        "|---|" + "---|" * len(nominal),
-    ]
-    elastic = contact.HertzElastic(stiffness)
-    for cls in DAMPED:
-        cells = []
-        for c in nominal:
-            sol = impact(cls(elastic, c), v0, mass)
-            cells.append(f"{-sol.y_events[0][0][1] / v0:.3f}")
-        lines.append(f"| {cls.__name__} | " + " | ".join(cells) + " |")
-    header = (
-        "Effective restitution (rebound speed / approach speed) of each damped law with the\n"
-        f"Hertz law (K = {float(stiffness):.3e} N/m^1.5, m = {mass} kg, v⁻ = {v0} m/s); by the\n"
-        "scaling argument of docs/restitution.md it depends on χ(c_e) only. Written by\n"
-        "experiments/contact_laws.py.\n\n"
-    )
-    (OUT / "contact_restitution.md").write_text(header + "\n".join(lines) + "\n")
-
-
 def main():
     OUT.mkdir(parents=True, exist_ok=True)
     stiffness = contact.journal_bearing_stiffness(RADIUS, CLEARANCE, **STEEL)
     elastic_figure(stiffness)
     friction_figure()
     damping_figure(stiffness)
-    restitution_table(stiffness)
     print(f"wrote figures to {OUT}")
 
 
