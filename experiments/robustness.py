@@ -8,8 +8,9 @@ one parameter at a time around a base case; writes the generated blocks of docs/
   and the base case over 20 s (**long**).
 
 Results go to `results/robustness/<family>.json`, one record per case as it finishes; a
-family stops starting new cases once it has used `--budget-min` minutes of CPU time (the page
-lists the cases not run). `docs` rewrites the page from the results.
+family stops starting new cases once it has used `--budget-min` minutes of CPU time, or when
+it is stopped (kill it, then `docs`): the page lists the cases not run. `docs` rewrites the
+page from the results.
 
     PYTHONPATH=. nice -n 10 python experiments/robustness.py impact|deploy|long|docs|all
 """
@@ -194,7 +195,7 @@ def _table(records, names):
             "moved (tighter) | Δ outputs vs tighter | ΔD vs tighter | d/ds finite | other "
             "solver | wall [s] |", "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for name in names:
-        r = records.get(name, {"status": "not run (CPU budget)"})
+        r = records.get(name, {"status": "not run (budget)"})
         energy = _f(r.get("energy_residual_rel"))
         if "ref_energy_residual_rel" in r:
             energy += f" ({r['ref_energy_residual_rel']:.1e})"
@@ -226,7 +227,7 @@ def _verdict(records, names):
     smallest = min((r.get("min_step", np.inf) for r in cases.values()), default=np.inf)
     lines = [
         f"{len(cases)} of {len(names)} cases run"
-        + (f" (not run, CPU budget: {'; '.join(missing)})" if missing else ""),
+        + (f" (not run in the time available: {'; '.join(missing)})" if missing else ""),
         "completed: " + (f"all but {failed}" if failed else "all"),
         f"largest energy residual {worst:.1e} of the energy moved (tolerance {ENERGY_TOL:g})"
         + (f"; above it: {energy}" if energy else ""),
