@@ -13,17 +13,16 @@ and α̇ there.
 How discriminating the check is: the reference is rerun with the spring stiffness changed by
 1e-5 and the latch stiffness by 1e-4 (relative), and the same measures reported.
 
-Usage: `python experiments/deploy_array_independent.py` (about 10 min on one loaded core).
+Usage: `cd tests && PYTHONPATH=.. python -m independent.deploy_array_report` (about 10 min on one
+loaded core).
 """
 
 from __future__ import annotations
 
 import copy
-import importlib.util
 import json
 import math
 import os
-import sys
 import time
 
 import matplotlib
@@ -42,23 +41,15 @@ from jaxdeploy.scenes import DeployArray  # noqa: E402
 from jaxdeploy.scenes.deploy_array import deployment_angle  # noqa: E402
 from jaxdeploy.simulation import simulate  # noqa: E402
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+from . import deploy_array_minimal  # noqa: E402
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..")
 DOC = os.path.join(ROOT, "docs", "deploy_array.md")
 FIGURE = os.path.join(ROOT, "docs", "figures", "deploy_array_independent.png")
 NUMBERS = os.path.join(ROOT, "docs", "deploy_array_independent.json")
-REFERENCE = os.path.join(ROOT, "tests", "independent", "deploy_array_minimal.py")
 T_END = 2.0  # s, the scene's default
 N_TIMES = 4001
 AGREEMENT = 1e-6  # relative, issue 24 item 5
-
-
-def load_reference():
-    name = "_independent_deploy_array_minimal"
-    spec = importlib.util.spec_from_file_location(name, REFERENCE)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
 def package_runs(scene):
@@ -117,7 +108,7 @@ def compare(ts, alpha, alpha_ref, t_lock, t_lock_ref, rate_lock, rate_lock_ref, 
 
 def main():
     started = time.perf_counter()
-    ref_module = load_reference()
+    ref_module = deploy_array_minimal
     model = ref_module.DeployArrayMinimal()
     lock_angle = model.alpha_lock
     uniform = np.linspace(0.0, T_END, N_TIMES)
@@ -194,7 +185,7 @@ def main():
     revision = code_revision()
     numbers = {
         "what": "ideal-joint deploy_array vs an independent one-coordinate model (issue 24 item 5)",
-        "command": "python experiments/deploy_array_independent.py",
+        "command": "cd tests && python -m independent.deploy_array_report",
         "t_end_s": T_END,
         "n_compared_times": int(ts.size),
         "agreement_required_rel": AGREEMENT,
