@@ -130,6 +130,7 @@ def overview_figure(scene, data: dict, swept, grid):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     numeric = [
         c
@@ -158,6 +159,9 @@ def overview_figure(scene, data: dict, swept, grid):
             ax.plot(x[order], y[order], "o-", ms=3, lw=1, label=label or None)
         if log_x:
             ax.set_xscale("log")
+        else:  # SI values such as a clearance of 1e-4 m: powers of ten, not 0.00010 labels
+            ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4), useOffset=False)
+            ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(5))
         ax.set_xlabel(f"{x_name} [{units[x_name]}]", fontsize=8)
         ax.set_ylabel(f"{name} [{units[name] or '-'}]", fontsize=8)
         ax.tick_params(labelsize=7)
