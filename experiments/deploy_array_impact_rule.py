@@ -32,6 +32,8 @@ import time
 
 import numpy as np
 
+from jaxdeploy.analysis import analyse
+from jaxdeploy.batch import reference_run
 from jaxdeploy.io import atomic_write_json, machine_description, replace_block, run_metadata
 from jaxdeploy.mechanism import RevoluteClearance, metered
 from jaxdeploy.robustness import energy_summary
@@ -148,7 +150,9 @@ def measure(repeats):
         rec["rejected"] = int(traj.stats["num_rejected_steps"])
         rec["summary"] = {
             k: float(v)
-            for k, v in scene.summary(params, mech, traj).items()
+            for k, v in analyse(scene, params, mech, traj, reference_run(scene, params, traj.ts))
+            .summary()
+            .items()
             if isinstance(v, (int, float))
         }
         rec["energy"] = _energy(scene, params, dict(scene.default_control))

@@ -32,7 +32,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from jaxdeploy.analysis import analyse  # noqa: E402
 from jaxdeploy.analysis.spectra import amplitude_spectrum  # noqa: E402
+from jaxdeploy.batch import reference_run  # noqa: E402
 from jaxdeploy.io import (  # noqa: E402
     atomic_savefig,
     code_revision,
@@ -63,7 +65,7 @@ def run(latch, overrides):
         mech, scene.initial_state(params, mech), T_END, n_save=N_SAVE, **scene.default_control
     )
     wall = time.perf_counter() - start
-    summary = scene.summary(params, mech, tr)
+    summary = analyse(scene, params, mech, tr, reference_run(scene, params, tr.ts)).summary()
     ch = {k: np.asarray(v) for k, v in scene.channels(mech, tr).items()}
     return {
         "status": tr.status(),

@@ -33,9 +33,9 @@ from typing import TYPE_CHECKING
 
 import jax
 
-jax.config.update("jax_enable_x64", True)
+from ._version import __version__
 
-__version__ = "0.1.0"
+jax.config.update("jax_enable_x64", True)
 
 # Public name -> the module that defines it (a module name maps to itself).
 _EXPORTS = {

@@ -65,6 +65,23 @@ def run_scene(
     return simulate(mechanism, initial, t_end, ts=ts, n_save=n_save, control=control, **options)
 
 
+def reference_run(scene: Scene, params: Mapping, ts, control: StepControl | None = None):
+    """The run a scene's analysis compares against (`jaxdeploy.analysis.Analysis`): its ideal
+    counterpart (`scene.ideal_counterpart()`) with the parameters it shares with `params`,
+    saved at the run's times `ts` (to `ts[-1]`), with its own default step control unless
+    `control` is given. **Returns:** a `Trajectory`, or None for a scene without an ideal
+    counterpart."""
+    ideal = scene.ideal_counterpart()
+    if ideal is None:
+        return None
+    p = ideal.resolve_params({k: float(v) for k, v in params.items() if k in ideal.params})
+    mechanism = ideal.build(p)
+    ts = np.asarray(ts, dtype=float)
+    control = ideal.default_control if control is None else control
+    initial = ideal.initial_state(p, mechanism)
+    return simulate(mechanism, initial, float(ts[-1]), ts=ts, control=control)
+
+
 @dataclass(frozen=True)
 class Batch:
     """A batch of simulations of one scene.
@@ -103,7 +120,7 @@ class Batch:
         return np.array([self.case(i).ok for i in range(self.size)])
 
 
-def _stack_cases(scene: Scene, cases, fixed: Mapping | None):
+def stack_cases(scene: Scene, cases, fixed: Mapping | None):
     """Validate every case (concretely, before tracing) and split varied from fixed names."""
     if isinstance(cases, Mapping):
         lengths = {k: np.size(v) for k, v in cases.items()}
@@ -263,7 +280,7 @@ def simulate_batch(
     early wait, masked), unless `lanes` refills them. Measured: docs/batch_throughput.md.
     """
     check_policy(group_size, lanes, segment_steps)
-    table, varied, shared = _stack_cases(scene, cases, fixed)
+    table, varied, shared = stack_cases(scene, cases, fixed)
     t_end = scene.default_t_end if t_end is None else t_end
     ts = jnp.linspace(0.0, t_end, n_save) if ts is None else jnp.asarray(ts, dtype=float)
     if varied:

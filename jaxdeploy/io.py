@@ -13,6 +13,8 @@ import tempfile
 
 import numpy as np
 
+from ._version import __version__
+
 TEMP_PREFIX = ".tmp-"
 
 
@@ -153,8 +155,6 @@ def run_metadata() -> dict:
     import diffrax
     import equinox
     import jax
-
-    from . import __version__
 
     return {
         "jaxdeploy": __version__,

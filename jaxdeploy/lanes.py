@@ -17,10 +17,10 @@ segment (`SaveAt(solver_state=True, made_jump=True)`); the step-size controller 
 (`_Resume`) so that the resumed solve starts with exactly the step the previous segment had
 proposed, with the controller's own state (diffrax's `dt0` would start it at `t + (t_next - t)`,
 which differs from `t_next` in the last bit). The proposal is what diffrax computes after a
-step: the controller's, clipped to the end time by diffrax's own rule (its private
-`_clip_to_end`, imported rather than rewritten: a resumed segment must start exactly where the
-uninterrupted loop would continue, so it must follow that rule in whatever diffrax is installed;
-tests/test_lanes.py checks the result bit for bit).
+step: the controller's, clipped to the end time by the rule of diffrax's integration loop
+(`_next_step_end`, written out here from diffrax 0.7's `_integrate.py` because diffrax does
+not export it; a resumed segment must start exactly where the uninterrupted loop would
+continue, and tests/test_lanes.py checks bit for bit that it does with the diffrax installed).
 Saved states come from each segment's `SaveAt(ts=...)`, with the times before the segment's
 start clipped to it (diffrax wants them inside [t0, t1]); those entries were saved by an
 earlier segment and are kept. A new case starts with the same step size, controller state and
@@ -56,9 +56,9 @@ import equinox as eqx
 import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
-from diffrax._integrate import _clip_to_end
 
-from .simulation import Trajectory, _integrate, _saved, _setup, simulate, solver_stats
+from .simulation import Trajectory, integrate, simulate, solver_stats
+from .simulation import prepare as prepare_run
 from .solvers import MechanismState, MechanismTerm, tracked_extremes
 from .solvers.wrapped_controller import WrappedController
 
@@ -109,6 +109,16 @@ def _clip_floor(t1):
     for _ in range(100):
         floor = eqxi.prevbefore(floor)
     return floor
+
+
+def _next_step_end(t, proposed, t_end, t_end_floor, keep):
+    """The end of the next step after a step that reached `t`, as diffrax's loop sets it: the
+    controller's `proposed` end, unless it lies within ~100 ULPs of `t_end` (past
+    `t_end_floor`), when it is `t_end` after an accepted step and the midpoint of what is
+    left after a rejected one (no sliver of a step for the dense output to divide by)."""
+    near_end = proposed > t_end_floor
+    clipped = jnp.where(keep, t_end, t + 0.5 * (t_end - t))
+    return jnp.where(near_end, clipped, proposed)
 
 
 class _Resume(WrappedController):
@@ -180,7 +190,7 @@ def simulate_in_lanes(
     lanes = min(lanes, n_cases)
 
     def setup(mechanism, initial):
-        return _setup(mechanism, initial, t_end, ts=ts, **options)
+        return prepare_run(mechanism, initial, t_end, ts=ts, **options)
 
     def take(tree, index):
         return jax.tree.map(lambda leaf: leaf[index], tree)
@@ -243,7 +253,7 @@ def simulate_in_lanes(
         run = setup(mechanism, MechanismState(*lane.y))
         start = jnp.where(active, lane.t, run.t_end)  # an idle lane takes no step
         controller = _Resume(run.controller, lane.t_next, lane.controller_state)
-        sol = _integrate(
+        sol = integrate(
             mechanism,
             lane.y,
             start,
@@ -276,7 +286,7 @@ def simulate_in_lanes(
             item=lane.item,
             y=jax.tree.map(lambda leaf: leaf[0], end_ys),
             t=t,
-            t_next=_clip_to_end(t, t_proposed, run.t_end, t1_floor, keep),
+            t_next=_next_step_end(t, t_proposed, run.t_end, t1_floor, keep),
             solver_state=sol.solver_state,
             controller_state=inner,
             made_jump=jnp.asarray(sol.made_jump),
@@ -349,4 +359,6 @@ def simulate_in_lanes(
     _, _, (saved_ts, saved_ys, result, stats, t_reached, extremes) = jax.lax.while_loop(
         cond, body, (first, jnp.array(lanes), blank)
     )
-    return Trajectory(saved_ts, *_saved(saved_ys), result, stats, None, t_reached, extremes)
+    return Trajectory.from_states(
+        saved_ts, saved_ys, result, stats, t_reached=t_reached, extremes=extremes
+    )

@@ -41,7 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .analysis.deploy_array import SPECTRUM_SEGMENT
+from .analysis.deploy_array import SPECTRUM_SEGMENT, lock_time
 from .analysis.spectra import interval_mean_rate, welch_psd
 
 SIGNALS = ("displacement", "velocity", "acceleration", "angle")
@@ -90,8 +90,6 @@ class Deployment:
 
 def ideal_lock_time(ts, alpha, lock_angle: float) -> float:
     """First time α reaches `lock_angle`, linear between saved states (concrete)."""
-    from .analysis.deploy_array import lock_time
-
     return lock_time(np.asarray(ts), np.asarray(alpha), lock_angle)
 
 

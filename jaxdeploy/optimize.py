@@ -160,13 +160,11 @@ class DesignProblem:
                 for k, v in ideal_scene.channels(ideal_scene.build(p), trajectory).items()
             }
         if lock_angle is None:
-            from .scenes.deploy_array import GEOMETRY
-
-            lock_angle = GEOMETRY["latch"]["engage_alpha"]
+            lock_angle = getattr(scene, "lock_angle", None)
         reference = self.ideal if self.ideal is not None else None
         self.lock_time = (
             ideal_lock_time(self.ts, reference["alpha"], lock_angle)
-            if reference is not None and "alpha" in reference
+            if reference is not None and "alpha" in reference and lock_angle is not None
             else 0.0
         )
         if not math.isfinite(self.lock_time):

@@ -34,7 +34,7 @@ from .solvers import (
 )
 from .solvers.step_control import DEFAULT_MAX_STEPS
 
-__all__ = ["StepControl", "Trajectory", "simulate"]
+__all__ = ["PreparedRun", "StepControl", "Trajectory", "integrate", "prepare", "simulate"]
 
 
 class Trajectory(eqx.Module):
@@ -63,6 +63,15 @@ class Trajectory(eqx.Module):
     step_times: jax.Array | None = None
     t_reached: jax.Array | None = None
     extremes: dict | None = None
+
+    @classmethod
+    def from_states(
+        cls, ts, ys, result, stats, *, step_times=None, t_reached=None, extremes=None
+    ) -> Trajectory:
+        """The trajectory of saved `MechanismState`s `ys` at times `ts` (what `integrate`
+        returns for `SaveAt(ts=...)`)."""
+        states = (ys.q, ys.v, ys.qdd, ys.lam, ys.memory)
+        return cls(ts, *states, result, stats, step_times, t_reached, extremes)
 
     @property
     def ok(self) -> bool:
@@ -127,11 +136,14 @@ def _inner_scan_kind_for(adjoint, solver):
     return replace(solver, solver=replace(inner, scan_kind=kind))
 
 
-def _integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **options):
+def integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **options):
     """`diffrax.diffeqsolve` of the mechanism from `y0` over [t0, t_end], never throwing: a
     failure is reported in the solution's `result`, and a run whose steps keep producing
     non-finite values stops with `RESULTS.nonfinite` at its last finite state
-    (`jaxdeploy.solvers.stop_at_non_finite`). `options`: `saveat`, `adjoint`, …"""
+    (`jaxdeploy.solvers.stop_at_non_finite`). `options`: `saveat`, `adjoint`, …
+
+    The lower-level half of `simulate`, for callers that drive the integration themselves
+    (`jaxdeploy.lanes` pauses and resumes runs): give it the pieces `prepare` returns."""
     time_scale = jnp.maximum(jnp.abs(t0), jnp.abs(t_end))
     return dfx.diffeqsolve(
         MechanismTerm(mechanism),
@@ -151,7 +163,7 @@ def _integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **o
 def _accepted_step_times(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps):
     """The ends of the accepted steps of an adaptive run (padded with +inf to `max_steps`),
     and the run's result."""
-    sol = _integrate(
+    sol = integrate(
         mechanism,
         y0,
         t0,
@@ -217,7 +229,7 @@ def _save_times(t0, t_end, n_save, ts):
 @eqx.filter_jit
 def _solve(mechanism, y0, t0, t_end, dt0, ts, solver, controller, max_steps, progress, adjoint):
     meter = dfx.TqdmProgressMeter() if progress else dfx.NoProgressMeter()
-    return _integrate(
+    return integrate(
         mechanism,
         y0,
         t0,
@@ -305,7 +317,7 @@ def simulate(
     **Returns:** a `Trajectory`; check `.ok` / `.status()`: a failed solve keeps the states it
     finished and says when and why it stopped.
     """
-    run = _setup(
+    run = prepare(
         mechanism,
         initial,
         t_end,
@@ -340,19 +352,19 @@ def simulate(
         run.adjoint,
     )
     (ts, end), (ys, _) = sol.ts, sol.ys
-    return Trajectory(
+    return Trajectory.from_states(
         ts,
-        *_saved(ys),
+        ys,
         sol.result,
         solver_stats(sol.stats, sol.solver_state),
-        run.step_times,
-        end[0],
-        tracked_extremes(sol.solver_state),
+        step_times=run.step_times,
+        t_reached=end[0],
+        extremes=tracked_extremes(sol.solver_state),
     )
 
 
-class _Setup(NamedTuple):
-    """A run of `simulate` after validation and defaults: what `diffeqsolve` gets."""
+class PreparedRun(NamedTuple):
+    """A run of `simulate` after validation and defaults: what `integrate` gets (`prepare`)."""
 
     y0: MechanismState
     t0: jax.Array
@@ -366,7 +378,7 @@ class _Setup(NamedTuple):
     step_times: jax.Array | None
 
 
-def _setup(
+def prepare(
     mechanism,
     initial,
     t_end,
@@ -387,10 +399,11 @@ def _setup(
     replay_steps=False,
     locate_events=True,
     extreme_samples=1,
-) -> _Setup:
-    """Validate `simulate`'s arguments and build its solver, step-size controller, initial
-    state and times (shared with the lane-refilled batches of `jaxdeploy.lanes`, which must
-    integrate every case exactly as `simulate` does)."""
+) -> PreparedRun:
+    """Validate `simulate`'s arguments (the same keywords) and build its solver, step-size
+    controller, initial state and times: `simulate` is `integrate` of these pieces. Public
+    for callers that must integrate exactly as `simulate` does while driving the loop
+    themselves (the lane-refilled batches of `jaxdeploy.lanes`)."""
     control = _step_control(
         control,
         solver=solver,
@@ -436,7 +449,7 @@ def _setup(
     elif replay_steps is not False and replay_steps is not None:
         step_times = _replay_times(replay_steps, t0, t_end)
         controller = ReplaySteps(step_times, dfx.RESULTS.successful)
-    return _Setup(
+    return PreparedRun(
         y0, t0, t_end, dt0, ts, solver, controller, control.max_steps, adjoint, step_times
     )
 
@@ -457,11 +470,6 @@ def _step_control(control, **keywords) -> StepControl:
             "step setting in the StepControl (e.g. control.replace(rtol=1e-8))"
         )
     return control
-
-
-def _saved(ys: MechanismState) -> tuple:
-    """`(q, v, qdd, lam, memory)` of saved states."""
-    return ys.q, ys.v, ys.qdd, ys.lam, ys.memory
 
 
 def solver_stats(stats, solver_state) -> dict:

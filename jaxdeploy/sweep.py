@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._validation import check_positive
-from .batch import _stack_cases, batch_function, step_control
+from .batch import DEFAULT_SEGMENT_STEPS, batch_function, stack_cases, step_control
 from .io import (
     atomic_write_json,
     atomic_write_npz,
@@ -66,9 +66,7 @@ def parse_policy(text: str) -> dict:
     """A batch policy, as the manifest records it: `"all"` (one vmap of the chunk),
     `"groups:G"` (vmapped groups of G one after another) or `"lanes:L"` / `"lanes:L:K"` (L
     lanes per device refilled every K steps, `jaxdeploy.lanes`; K default
-    `lanes.DEFAULT_SEGMENT_STEPS`). Anything else is refused, naming the valid forms."""
-    from .lanes import DEFAULT_SEGMENT_STEPS
-
+    `batch.DEFAULT_SEGMENT_STEPS`). Anything else is refused, naming the valid forms."""
     parts = str(text).strip().split(":")
     try:
         numbers = [int(p) for p in parts[1:]]
@@ -221,7 +219,7 @@ def sweep(
     cases = grid_cases(grid)
     n_cases = len(next(iter(cases.values())))
     # Validate every case before anything runs (names, ranges), and split varied names.
-    table, varied, shared = _stack_cases(scene, cases, fixed)
+    table, varied, shared = stack_cases(scene, cases, fixed)
     if not varied:  # one case (or copies): still trace the first grid name
         first = next(iter(grid))
         varied, shared = (first,), {k: v for k, v in shared.items() if k != first}

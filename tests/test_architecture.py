@@ -1,10 +1,7 @@
 """The package's floors (docs/architecture.md): each module imports only its own floor and the
 floors below, and no module imports another unit's private names. Imports inside functions
-count too (they are how a cycle hides).
-
-`KNOWN_DEBT` lists the violations that exist today (issue 23, item 1 removes them). The test
-fails on a violation not listed — and on a listed one that is gone, so the list only shrinks:
-delete its line when you remove the import."""
+count too (they are how a cycle hides). Issue 23 item 1 removed the last violations; there is
+no list of exceptions."""
 
 import ast
 import pathlib
@@ -16,6 +13,7 @@ PACKAGE = pathlib.Path(jaxdeploy.__file__).parent
 # Floor of each top-level unit of the package (docs/architecture.md, "The floors").
 FLOORS = {
     "_validation": 0,
+    "_version": 0,
     "io": 0,
     "_compilation_cache": 0,
     "contact": 1,
@@ -35,39 +33,31 @@ FLOORS = {
     "cli": 8,
 }
 
-# "importer -> imported module:name (kind)", modules relative to `jaxdeploy.`; kind "upward"
-# (to a higher floor) or "private" (another unit's, or another library's, private name).
-KNOWN_DEBT = {
-    # scenes ↔ analysis: a scene imports its own analysis (inside methods)
-    "scenes.slider_crank -> analysis.slider_crank:slider_crank_summary (upward)",
-    "scenes.slider_crank -> analysis.slider_crank:plot_slider_crank (upward)",
-    "scenes.deploy_array -> analysis.contact_forces:clearance_joint_history (upward)",
-    "scenes.deploy_array -> analysis.deploy_array:deploy_array_summary (upward)",
-    "scenes.deploy_array -> analysis.deploy_array:plot_deploy_array (upward)",
-    # the batching wing reaches into simulate's internals and a sibling's private helper
-    "lanes -> simulation:_setup (private)",
-    "lanes -> simulation:_integrate (private)",
-    "lanes -> simulation:_saved (private)",
-    "lanes -> diffrax._integrate:_clip_to_end (private)",
-    "sweep -> batch:_stack_cases (private)",
-    "commands.fit -> fit._plots:plot_fit (private)",
-    "io -> jaxdeploy:__version__ (upward)",
-}
-
 
 def _unit(module: str) -> str | None:
     parts = module.split(".")
     return parts[1] if len(parts) > 1 else None
 
 
-def _imports():
-    """(importer, imported module, imported name or None) for every import in the package."""
+def _imports(top_level=None):
+    """(importer, imported module, imported name or None) for every import in the package;
+    `top_level` True: only the imports run when the module is imported (not inside a
+    function), False: only those inside functions."""
     for path in sorted(PACKAGE.rglob("*.py")):
         parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
         is_package = parts[-1] == "__init__"
         module = ".".join(parts[:-1] if is_package else parts)
         package = module if is_package else module.rsplit(".", 1)[0]
-        for node in ast.walk(ast.parse(path.read_text())):
+        tree = ast.parse(path.read_text())
+        in_functions = {
+            id(node)
+            for function in ast.walk(tree)
+            if isinstance(function, ast.FunctionDef | ast.AsyncFunctionDef)
+            for node in ast.walk(function)
+        }
+        for node in ast.walk(tree):
+            if top_level is not None and (id(node) in in_functions) == top_level:
+                continue
             if isinstance(node, ast.Import):
                 for alias in node.names:
                     yield module, alias.name, None
@@ -79,6 +69,19 @@ def _imports():
                     target = node.module or ""
                 for alias in node.names:
                     yield module, target, alias.name
+
+
+def _loaded_by(target, name):
+    """The package modules an import of `name` from `target` loads: the module and each
+    package above it, and `target.name` when that is a submodule."""
+    modules = set()
+    parts = target.split(".")
+    for k in range(1, len(parts) + 1):
+        modules.add(".".join(parts[:k]))
+    if name is not None:
+        modules.add(f"{target}.{name}")
+    # The root is loaded first by any import, and its lazy public face loads nothing else.
+    return {m for m in modules if m.split(".")[0] == "jaxdeploy" and m != "jaxdeploy"}
 
 
 def _describe(importer, target, name, kind):
@@ -108,7 +111,8 @@ def _violations():
             continue
         if target_unit != source_unit:
             private_module = any(p.startswith("_") for p in target.split(".")[2:])
-            private_name = name is not None and name.startswith("_")
+            dunder = name is not None and name.startswith("__") and name.endswith("__")
+            private_name = name is not None and name.startswith("_") and not dunder
             if private_module or private_name:
                 found.add(_describe(importer, target, name, "private"))
     return found
@@ -122,10 +126,47 @@ def test_every_unit_has_a_floor():
 
 
 def test_imports_go_down_the_floors_and_not_into_private_names():
-    found = _violations()
-    new = sorted(found - KNOWN_DEBT)
-    gone = sorted(KNOWN_DEBT - found)
-    assert not new, (
-        "imports against docs/architecture.md's floors (or private names):\n" + "\n".join(new)
+    # "importer -> imported module:name (kind)", modules relative to `jaxdeploy.`; kind
+    # "upward" (to a higher floor) or "private" (another unit's, or another library's, name).
+    found = sorted(_violations())
+    assert not found, (
+        "imports against docs/architecture.md's floors (or private names):\n" + "\n".join(found)
     )
-    assert not gone, "debt paid: delete these lines from KNOWN_DEBT:\n" + "\n".join(gone)
+
+
+def test_the_batching_wing_has_one_entry():
+    """`batch` is the way into batched runs: lane refilling (`lanes`) is its policy, used by
+    nothing else, and `lanes` integrates through `simulation`'s public functions."""
+    users = {importer for importer, target, name in _imports() if _unit(target) == "lanes"}
+    users |= {importer for importer, target, name in _imports() if name == "lanes"}
+    assert users <= {"jaxdeploy.batch", "jaxdeploy.lanes"}, users
+
+
+def test_no_import_inside_a_function_hides_a_cycle():
+    """An import inside a function is for laziness (start-up time, optional dependencies),
+    never to break a cycle: the module it imports must not import the importer back when it
+    is loaded."""
+    graph = {}
+    for importer, target, name in _imports(top_level=True):
+        graph.setdefault(importer, set()).update(_loaded_by(target, name))
+
+    def reaches(start, goal):
+        seen, todo = set(), [start]
+        while todo:
+            module = todo.pop()
+            if module == goal:
+                return True
+            if module not in seen:
+                seen.add(module)
+                todo.extend(graph.get(module, ()))
+        return False
+
+    hidden = sorted(
+        f"{importer} -> {loaded}"
+        for importer, target, name in _imports(top_level=False)
+        for loaded in _loaded_by(target, name)
+        if loaded != importer
+        and not importer.startswith(loaded + ".")  # its own packages are loaded already
+        and reaches(loaded, importer)
+    )
+    assert not hidden, "function-level imports that hide a cycle:\n" + "\n".join(hidden)

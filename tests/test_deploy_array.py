@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from jaxdeploy.analysis.deploy_array import SPECTRUM_SEGMENT, deploy_array_summary, lock_time
+from jaxdeploy.analysis import analyse
+from jaxdeploy.analysis.deploy_array import SPECTRUM_SEGMENT, lock_time
 from jaxdeploy.analysis.spectra import interval_mean_rate, peak_frequency
 from jaxdeploy.scenes import DeployArray
 from jaxdeploy.scenes.deploy_array import GEOMETRY, deployment_angle
@@ -152,7 +153,7 @@ def test_both_solvers_report_the_same_post_lock_spectral_peaks():
         control = {**scene.default_control, "solver": solver}
         tr = simulate(mech, init, scene.default_t_end, n_save=2001, **control)
         assert tr.ok, tr.status()
-        summary = deploy_array_summary(scene, params, mech, tr)
+        summary = analyse(scene, params, mech, tr).summary()
         peaks[solver] = [summary[f"{p}_peak_freq_hz"] for p in ("panel1", "panel2")]
     np.testing.assert_allclose(
         peaks["tsit5"], peaks["generalized_alpha"], atol=0.5 / SPECTRUM_SEGMENT

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from jaxdeploy.analysis import analyse
 from jaxdeploy.analysis.contact_forces import clearance_joint_history, contact_extremes
 from jaxdeploy.scenes import DeployArray, Impact, Pendulum, SliderCrank, hertz_impact_closed_form
 from jaxdeploy.scenes.slider_crank import ideal_slider_kinematics
@@ -134,7 +135,7 @@ def test_slider_crank_summary_does_not_depend_on_the_save_grid():
     mech = scene.build(params)
     s0 = scene.initial_state(params, mech)
     runs = {n: simulate(mech, s0, 2.5e-3, n_save=n, **scene.default_control) for n in (21, 2001)}
-    summaries = {n: scene.summary(params, mech, tr) for n, tr in runs.items()}
+    summaries = {n: analyse(scene, params, mech, tr).summary() for n, tr in runs.items()}
     assert summaries[21] == summaries[2001]
     assert summaries[21]["max_contact_force"] > 100.0  # there was an impact
     (history,) = clearance_joint_history(mech, runs[2001]).values()
@@ -153,7 +154,7 @@ def test_deploy_array_summary_agrees_at_501_and_20001_saved_states():
     for n in (501, 20001):
         tr = simulate(mech, s0, scene.default_t_end, n_save=n, **scene.default_control)
         assert tr.ok, tr.status()
-        summaries.append(scene.summary(params, mech, tr))
+        summaries.append(analyse(scene, params, mech, tr).summary())
     coarse, fine = summaries
     for key in coarse:
         if key.endswith(("_max_contact_force", "_max_penetration")) or key == "max_contact_force":

@@ -127,6 +127,7 @@ def test_sweep_without_objective_writes_features_with_units(swept):
     assert "max_constraint_violation [m]" in table[0] and len(table) == 11
 
     # A case's features are what a standalone run of its parameters reports.
+    from jaxdeploy.analysis import analyse
     from jaxdeploy.batch import run_scene
     from jaxdeploy.commands._results import run_quantities
     from jaxdeploy.scenes import Pendulum
@@ -135,7 +136,8 @@ def test_sweep_without_objective_writes_features_with_units(swept):
     row = rows[7]
     params = scene.resolve_params({"length": row["length"], "initial_angle": row["initial_angle"]})
     single = run_scene(scene, params, T_END, n_save=N_SAVE)
-    expected = {**run_quantities(single), **scene.summary(params, scene.build(params), single)}
+    summary = analyse(scene, params, scene.build(params), single).summary()
+    expected = {**run_quantities(single), **summary}
     for key in ("status", "t_reached_s", "n_steps", "n_rejected"):
         assert row[key] == expected[key], key
     assert row["max_constraint_violation"] == pytest.approx(

@@ -3,45 +3,16 @@ the whole run."""
 
 from __future__ import annotations
 
-import equinox as eqx
-import jax
-import jax.numpy as jnp
 import numpy as np
 
-from ..mechanism import Mechanism, RevoluteClearance
+from ..mechanism import Mechanism, RevoluteClearance, contact_history
 
 
 def clearance_joint_history(mechanism: Mechanism, trajectory) -> dict[int, dict]:
     """For every clearance joint (by element index): eccentricity (N, 2), penetration,
     penetration rate, sliding velocity, normal force and friction force (N,) at the saved
-    states, evaluated with the saved memory (impact velocities). The forces are net of the
-    bore's near and far side (`RevoluteClearance.contact_forces`; the far side is zero unless
-    the clearance is below ~3σ)."""
-    return {
-        index: _joint_history(mechanism, index, trajectory.q, trajectory.v, trajectory.memory)
-        for index in mechanism.find(RevoluteClearance)
-    }
-
-
-# Compiled once per mechanism structure and joint, not per call: a sweep evaluates it for
-# every case (the parameters are leaves of `mechanism`, so new values reuse the program).
-@eqx.filter_jit
-def _joint_history(mechanism, index, q, v, memory):
-    joint = mechanism.elements[index]
-
-    def at(q, v, memory):
-        kin = mechanism.kinematics(q, v)
-        fn, ft, g = joint.contact_forces(kin, memory[index])
-        return {
-            "eccentricity": g.eccentricity,
-            "penetration": g.penetration,
-            "penetration_rate": g.penetration_rate,
-            "sliding_velocity": g.sliding_velocity,
-            "normal_force": fn,
-            "friction_force": jnp.asarray(ft) + 0.0 * fn,
-        }
-
-    return jax.vmap(at)(q, v, memory)
+    states of `trajectory` (`jaxdeploy.mechanism.contact_history`)."""
+    return contact_history(mechanism, trajectory.q, trajectory.v, trajectory.memory)
 
 
 def contact_extremes(mechanism: Mechanism, trajectory) -> dict[int, dict]:

@@ -7,11 +7,12 @@ from __future__ import annotations
 
 import functools
 import os
-import weakref
 
 import numpy as np
 
 from ..io import atomic_savefig
+from ..scenes.deploy_array import GEOMETRY, deployment_angle
+from .base import Analysis
 from .contact_forces import clearance_joint_history, contact_extremes
 from .spectra import interval_mean_rate, peak_frequency, welch_psd
 
@@ -54,73 +55,48 @@ def lock_time(ts, alpha, lock_angle):
     return float(ts[i - 1] + frac * (ts[i] - ts[i - 1]))
 
 
-@functools.lru_cache(maxsize=4)
-def _ideal_reference_cached(ts_key, t_end, control, param_key, latch):
-    from ..scenes.deploy_array import DeployArray
-    from ..simulation import simulate
+class DeployArrayAnalysis(Analysis):
+    """`deploy_array_summary` and `plot_deploy_array` of a run, from its outputs
+    (`deploy_array_outputs`, computed once for both). `reference`: the ideal-joint
+    counterpart's trajectory at the same saved times (`DeployArray.ideal_counterpart()`), or
+    None: then the deviations from the ideal mechanism and its lock time are left out."""
 
-    # The same latch model: the reference differs from the run by its joints only.
-    scene = DeployArray(ideal=True, latch=latch)
-    params = scene.resolve_params({k: v for k, v in param_key if k in scene.params})
-    mech = scene.build(params)
-    tr = simulate(
-        mech, scene.initial_state(params, mech), t_end, ts=np.array(ts_key), control=control
-    )
-    return np.asarray(tr.q), np.asarray(tr.qdd), tr.status()
+    uses_reference = True
 
+    @functools.cached_property
+    def outputs(self) -> dict:
+        return deploy_array_outputs(self.mechanism, self.trajectory, self.reference)
 
-def ideal_reference(scene, params, trajectory):
-    """The ideal-joint mechanism's trajectory at the same saved times (cached)."""
-    from ..scenes.deploy_array import DeployArray
+    def summary(self) -> dict:
+        return deploy_array_summary(self.outputs, self.mechanism, self.trajectory)
 
-    ts = tuple(np.asarray(trajectory.ts).tolist())
-    # Keyed by the parameters the ideal mechanism uses: runs that differ only in their
-    # hinges' contact (a sweep over roughness or clearance) share one reference.
-    unused = DeployArray(ideal=True, latch=scene.options["latch"]).ignored_params()
-    shared = tuple(sorted((k, float(v)) for k, v in params.items() if k not in unused))
-    # A StepControl is frozen and hashable: it keys the cache as it is.
-    return _ideal_reference_cached(
-        ts, ts[-1], scene.default_control, shared, scene.options["latch"]
-    )
+    def plot(self, out_dir: str) -> list[str]:
+        return plot_deploy_array(self.outputs, out_dir)
 
 
-# The last outputs computed, keyed by the trajectory and mechanism objects themselves: the
-# summary and the plots of one run share them instead of evaluating the contact history and
-# point deviations twice. Weak references, so a cached run never outlives its trajectory.
-_last_outputs: dict = {}
-
-
-def deploy_array_outputs(scene, params, mechanism, trajectory) -> dict:
-    """Time series of every output (numpy); the most recent run's outputs are reused."""
-    key = tuple(sorted((k, float(v)) for k, v in params.items()))
-    cached = _last_outputs.get("entry")
-    if cached is not None:
-        traj_ref, mech_ref, cached_key, outputs = cached
-        if traj_ref() is trajectory and mech_ref() is mechanism and cached_key == key:
-            return outputs
-    outputs = _compute_outputs(scene, params, mechanism, trajectory)
-    _last_outputs["entry"] = (weakref.ref(trajectory), weakref.ref(mechanism), key, outputs)
-    return outputs
-
-
-def _compute_outputs(scene, params, mechanism, trajectory) -> dict:
-    from ..scenes.deploy_array import GEOMETRY, deployment_angle
-
+def deploy_array_outputs(mechanism, trajectory, reference=None) -> dict:
+    """Time series of every output (numpy): deployment angle `alpha`, lock time, each panel's
+    centre acceleration and interval-mean acceleration, each clearance joint's contact
+    history (`joints`, by journal body); with the `reference` trajectory (the ideal-joint
+    mechanism at the same saved times) also `alpha_ideal`, `lock_time_ideal`,
+    `ideal_status` and each panel's centre and tip `*_deviation` from it."""
     ts = np.asarray(trajectory.ts)
     q, qdd = np.asarray(trajectory.q), np.asarray(trajectory.qdd)
-    q_ideal, qdd_ideal, ideal_status = ideal_reference(scene, params, trajectory)
-    alpha, alpha_ideal = deployment_angle(q), deployment_angle(q_ideal)
-    points, points_ideal = panel_points(mechanism, q), panel_points(mechanism, q_ideal)
-    out = {
-        "t": ts,
-        "alpha": alpha,
-        "alpha_ideal": alpha_ideal,
-        "ideal_status": ideal_status,
-        "lock_time": lock_time(ts, alpha, GEOMETRY["latch"]["engage_alpha"]),
-        "lock_time_ideal": lock_time(ts, alpha_ideal, GEOMETRY["latch"]["engage_alpha"]),
-    }
-    for key in points:
-        out[f"{key}_deviation"] = points[key] - points_ideal[key]
+    lock_angle = GEOMETRY["latch"]["engage_alpha"]
+    alpha = deployment_angle(q)
+    out = {"t": ts, "alpha": alpha, "lock_time": lock_time(ts, alpha, lock_angle)}
+    if reference is not None:
+        if not np.array_equal(np.asarray(reference.ts), ts):
+            raise ValueError(
+                "reference: its saved times must be the run's (run it with ts=trajectory.ts)"
+            )
+        q_ideal = np.asarray(reference.q)
+        out["alpha_ideal"] = deployment_angle(q_ideal)
+        out["ideal_status"] = reference.status()
+        out["lock_time_ideal"] = lock_time(ts, out["alpha_ideal"], lock_angle)
+        points, points_ideal = panel_points(mechanism, q), panel_points(mechanism, q_ideal)
+        for key in points:
+            out[f"{key}_deviation"] = points[key] - points_ideal[key]
     for panel in PANELS:
         k = mechanism.body_index(panel)
         out[f"{panel}_acceleration"] = qdd[:, 3 * k : 3 * k + 2]
@@ -136,25 +112,29 @@ def _compute_outputs(scene, params, mechanism, trajectory) -> dict:
     return out
 
 
-def deploy_array_summary(scene, params, mechanism, trajectory) -> dict:
-    o = deploy_array_outputs(scene, params, mechanism, trajectory)
+def deploy_array_summary(outputs, mechanism, trajectory) -> dict:
+    """Headline numbers of a run from its `deploy_array_outputs`: lock time, the largest
+    deviations from the ideal mechanism before and after the lock (when the outputs have
+    the reference), post-lock spectral peaks, contact extremes."""
+    o = outputs
     ts = o["t"]
     t_lock = o["lock_time"] if np.isfinite(o["lock_time"]) else ts[-1]
     deploy, locked = ts <= t_lock, ts > t_lock
-    dev = np.abs(o["alpha"] - o["alpha_ideal"])
-    summary = {
-        "lock_time": o["lock_time"],
-        "lock_time_ideal": o["lock_time_ideal"],
-        "max_angle_deviation_deploy": float(dev[deploy].max()),
-        "max_angle_deviation_locked": float(dev[locked].max()) if locked.any() else 0.0,
-    }
+    with_reference = "alpha_ideal" in o
+    summary = {"lock_time": o["lock_time"]}
+    if with_reference:
+        dev = np.abs(o["alpha"] - o["alpha_ideal"])
+        summary["lock_time_ideal"] = o["lock_time_ideal"]
+        summary["max_angle_deviation_deploy"] = float(dev[deploy].max())
+        summary["max_angle_deviation_locked"] = float(dev[locked].max()) if locked.any() else 0.0
     for panel in PANELS:
-        d = np.abs(o[f"{panel}_centre_deviation"])
-        summary[f"{panel}_max_dx"] = float(d[:, 0].max())
-        summary[f"{panel}_max_dy"] = float(d[:, 1].max())
-        tip = np.abs(o[f"{panel}_tip_deviation"])
-        summary[f"{panel}_tip_max_dx"] = float(tip[:, 0].max())
-        summary[f"{panel}_tip_max_dy"] = float(tip[:, 1].max())
+        if with_reference:
+            d = np.abs(o[f"{panel}_centre_deviation"])
+            summary[f"{panel}_max_dx"] = float(d[:, 0].max())
+            summary[f"{panel}_max_dy"] = float(d[:, 1].max())
+            tip = np.abs(o[f"{panel}_tip_deviation"])
+            summary[f"{panel}_tip_max_dx"] = float(tip[:, 0].max())
+            summary[f"{panel}_tip_max_dy"] = float(tip[:, 1].max())
         # Intervals that begin at or after the lock.
         after = ts[:-1] >= t_lock
         acc_y = o[f"{panel}_mean_acceleration"][after, 1]
@@ -171,17 +151,21 @@ def deploy_array_summary(scene, params, mechanism, trajectory) -> dict:
         summary[f"{owner}_max_penetration"] = extremes["max_penetration"]
     forces = [j["max_normal_force"] for j in joints.values()]
     summary["max_contact_force"] = max(forces, default=0.0)
-    summary["ideal_reference_status"] = o["ideal_status"]
+    if with_reference:
+        summary["ideal_reference_status"] = o["ideal_status"]
     return summary
 
 
-def plot_deploy_array(scene, params, mechanism, trajectory, out_dir) -> list[str]:
+def plot_deploy_array(outputs, out_dir) -> list[str]:
+    """Figures of a run from its `deploy_array_outputs`; the deviations from the ideal
+    mechanism only when the outputs have the reference."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    o = deploy_array_outputs(scene, params, mechanism, trajectory)
+    o = outputs
+    with_reference = "alpha_ideal" in o
     ts = o["t"]
     t_lock = o["lock_time"] if np.isfinite(o["lock_time"]) else ts[-1]
     files = []
@@ -193,33 +177,39 @@ def plot_deploy_array(scene, params, mechanism, trajectory, out_dir) -> list[str
         plt.close(fig)
         files.append(path)
 
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    # The angle, with the ideal mechanism's and the deviation from it below when there is
+    # a reference; the lock marked on the lower axes.
+    rows = 2 if with_reference else 1
+    fig, axes = plt.subplots(rows, 1, figsize=(7, 3 * rows), sharex=True, squeeze=False)
+    ax1 = axes[0, 0]
     ax1.plot(ts, np.degrees(o["alpha"]), label="clearance joints")
-    ax1.plot(ts, np.degrees(o["alpha_ideal"]), "k--", lw=1, label="ideal joints")
+    if with_reference:
+        ax1.plot(ts, np.degrees(o["alpha_ideal"]), "k--", lw=1, label="ideal joints")
+        axes[1, 0].plot(ts, np.degrees(o["alpha"] - o["alpha_ideal"]), lw=0.8)
+        axes[1, 0].set_ylabel("α − α_ideal [deg]")
     ax1.set_ylabel("deployment angle α [deg]")
     ax1.legend()
-    ax2.plot(ts, np.degrees(o["alpha"] - o["alpha_ideal"]), lw=0.8)
-    ax2.axvline(t_lock, color="grey", ls=":", label="lock")
-    ax2.set_ylabel("α − α_ideal [deg]")
-    ax2.set_xlabel("time [s]")
-    for ax in (ax1, ax2):
+    axes[-1, 0].axvline(t_lock, color="grey", ls=":", label="lock")
+    axes[-1, 0].set_xlabel("time [s]")
+    for ax in axes[:, 0]:
         ax.grid(alpha=0.3)
     save(fig, "deployment_angle.png")
 
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
-    for row, panel in enumerate(PANELS):
-        for col, axis_name in enumerate("XY"):
-            ax = axes[row, col]
-            for where, style in (("centre", "-"), ("tip", "--")):
-                d = o[f"{panel}_{where}_deviation"][:, col] * 1e6
-                ax.plot(ts, d, style, lw=0.7, label=where)
-            ax.set_title(f"{panel}: {axis_name} displacement deviation")
-            ax.set_ylabel("deviation [µm]")
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=8)
-    for ax in axes[-1]:
-        ax.set_xlabel("time [s]")
-    save(fig, "panel_displacement_deviation.png")
+    if with_reference:
+        fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
+        for row, panel in enumerate(PANELS):
+            for col, axis_name in enumerate("XY"):
+                ax = axes[row, col]
+                for where, style in (("centre", "-"), ("tip", "--")):
+                    d = o[f"{panel}_{where}_deviation"][:, col] * 1e6
+                    ax.plot(ts, d, style, lw=0.7, label=where)
+                ax.set_title(f"{panel}: {axis_name} displacement deviation")
+                ax.set_ylabel("deviation [µm]")
+                ax.grid(alpha=0.3)
+                ax.legend(fontsize=8)
+        for ax in axes[-1]:
+            ax.set_xlabel("time [s]")
+        save(fig, "panel_displacement_deviation.png")
 
     fig, axes = plt.subplots(2, 2, figsize=(10, 6))
     for row, panel in enumerate(PANELS):

@@ -8,10 +8,24 @@ import os
 import numpy as np
 
 from ..io import atomic_savefig
+from ..scenes.slider_crank import ideal_slider_kinematics
+from .base import Analysis
 from .contact_forces import acceleration_extremes, clearance_joint_history, contact_extremes
 
 
-def slider_crank_summary(scene, params, mechanism, trajectory) -> dict:
+class SliderCrankAnalysis(Analysis):
+    """`slider_crank_summary` and `plot_slider_crank` of a run (the ideal mechanism is the
+    closed form `ideal_slider_kinematics`: no reference run)."""
+
+    def summary(self) -> dict:
+        return slider_crank_summary(self.mechanism, self.trajectory)
+
+    def plot(self, out_dir: str) -> list[str]:
+        params = self.scene.complete(self.params)
+        return plot_slider_crank(params, self.mechanism, self.trajectory, out_dir)
+
+
+def slider_crank_summary(mechanism, trajectory) -> dict:
     """Slider acceleration extremes [m/s²], largest contact force [N] and penetration [m] of
     the run, tracked over every accepted step (independent of the saved times)."""
     acc_min, acc_max = acceleration_extremes(trajectory, 3 * mechanism.body_index("slider"))
@@ -23,13 +37,13 @@ def slider_crank_summary(scene, params, mechanism, trajectory) -> dict:
     return summary
 
 
-def plot_slider_crank(scene, params, mechanism, trajectory, out_dir) -> list[str]:
+def plot_slider_crank(params, mechanism, trajectory, out_dir) -> list[str]:
+    """Slider acceleration against the closed-form ideal one, and per clearance joint the
+    journal orbit and contact force; `params` complete (`SliderCrank.complete`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from ..scenes.slider_crank import ideal_slider_kinematics
 
     ts = np.asarray(trajectory.ts)
     crank_angle = np.degrees(float(params["crank_speed"]) * ts)

@@ -219,3 +219,26 @@ def check_used(scene, names, flag: str) -> None:
                 f"{flag} {name}: scene {scene.name!r} with {options} does not use {name!r}; it "
                 f"counts with --scene-option {ignored[name]}"
             )
+
+
+def scene_of(name: str, args):
+    """The scene `name` of a command line, built with its `--scene-option`s; an unknown scene
+    or option, or a bad option value, raises `ValueError` naming the valid ones."""
+    from ..scenes import SCENES, get_scene
+
+    if name not in SCENES:
+        raise ValueError(f"unknown scene {name!r}; valid: {', '.join(sorted(SCENES))}")
+    try:
+        return get_scene(name, **parse_pairs(args.scene_option, "--scene-option"))
+    except (ValueError, TypeError) as err:
+        raise ValueError(f"--scene-option: {err}") from None
+
+
+def scene_settings(scene, args) -> tuple[dict, dict, object]:
+    """`(assignments, params, control)` of a command line for `scene`: its `--set` values,
+    checked (names, ranges, and used by the scene's options); the complete parameters; the
+    `StepControl` of the step-control flags. A bad one raises `ValueError` naming it."""
+    assignments = parse_assignments(args.set)
+    params = scene.resolve_params(assignments)
+    check_used(scene, assignments, "--set")
+    return assignments, params, step_control(args, scene)

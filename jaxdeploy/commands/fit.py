@@ -26,12 +26,11 @@ from ._args import (
     SCENE_OPTION_HELP,
     SET_HELP,
     add_step_control,
-    check_used,
     integer_at_least,
-    parse_assignments,
     parse_pairs,
     positive,
-    step_control,
+    scene_of,
+    scene_settings,
 )
 
 NAME = "fit"
@@ -241,8 +240,7 @@ def run(args) -> int:
     import os
     import time
 
-    from ..fit import MeasurementError, fit, load_measurements, make_parameters
-    from ..fit._plots import plot_fit
+    from ..fit import MeasurementError, fit, load_measurements, make_parameters, plot_fit
     from ..io import (
         atomic_write_bytes,
         atomic_write_json,
@@ -252,28 +250,24 @@ def run(args) -> int:
         prepare_output_dir,
         run_metadata,
     )
-    from ..scenes import get_scene
 
     try:
-        scene = get_scene(args.scene, **parse_pairs(args.scene_option, "--scene-option"))
-    except (ValueError, TypeError) as err:
-        return _fail(f"--scene {args.scene}: {err}")
+        scene = scene_of(args.scene, args)
+    except ValueError as err:
+        return _fail(str(err))
     try:
         data = load_measurements(args.data)
         if args.channels:
             data = data.select([c.strip() for c in args.channels.split(",") if c.strip()])
         if args.noise:
             data = data.with_noise(_noise(args.noise, data.names))
-        assignments = parse_assignments(args.set)
-        fixed = scene.resolve_params(assignments)
+        _, fixed, control = scene_settings(scene, args)
         params = make_parameters(scene, args.params, fixed)
-        check_used(scene, assignments, "--set")
         stages = _stages(args, data)
     except (MeasurementError, ValueError) as err:
         return _fail(str(err))
     # Refusals happen before the folder is created and before anything is compiled.
     try:
-        control = step_control(args, scene)
         out = args.out or default_output_dir("fit", scene.name)
         check_output_dir(out, args.overwrite)
     except (ValueError, FileExistsError) as err:

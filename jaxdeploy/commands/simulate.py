@@ -11,13 +11,11 @@ from ._args import (
     SCENE_OPTION_HELP,
     SET_HELP,
     add_step_control,
-    check_used,
     integer_at_least,
-    parse_assignments,
-    parse_pairs,
     positive,
     refuse,
-    step_control,
+    scene_of,
+    scene_settings,
 )
 
 NAME = "simulate"
@@ -73,6 +71,12 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--quiet", action="store_true", help="print nothing but errors (no phases, no progress)"
     )
+    parser.add_argument(
+        "--no-reference",
+        action="store_true",
+        help="skip the ideal-joint reference run (deploy_array): no deviations from the ideal "
+        "mechanism in the summary and plots, one simulation fewer",
+    )
     add_step_control(parser)
 
 
@@ -120,22 +124,13 @@ def _duration(seconds: float) -> str:
 def run(args) -> int:
     from ..io import check_output_dir, default_output_dir
     from ..mechanism import AssemblyError
-    from ..scenes import SCENES, get_scene
 
     # Every refusal happens here, before the output folder is created and before the solver
     # is compiled: a bad run leaves nothing behind.
     scene_name = args.scene or DEFAULT_SCENE
-    if scene_name not in SCENES:
-        return refuse(f"unknown scene {scene_name!r}; valid: {', '.join(sorted(SCENES))}")
     try:
-        scene = get_scene(scene_name, **parse_pairs(args.scene_option, "--scene-option"))
-    except ValueError as err:
-        return refuse(f"--scene-option: {err}")
-    try:
-        assignments = parse_assignments(args.set)
-        params = scene.resolve_params(assignments)
-        check_used(scene, assignments, "--set")
-        control = step_control(args, scene)
+        scene = scene_of(scene_name, args)
+        _, params, control = scene_settings(scene, args)
     except ValueError as err:
         return refuse(str(err))
     t_end = scene.default_t_end if args.t_end is None else args.t_end
@@ -163,6 +158,8 @@ def run(args) -> int:
 
 
 def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phases) -> int:
+    from ..analysis import analysis_class
+    from ..batch import reference_run
     from ..io import (
         atomic_write_json,
         atomic_write_npz,
@@ -198,8 +195,17 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
         "t_end_s": t_end,
         **run_quantities(trajectory),
     }
+    analysis_type = analysis_class(scene)
+    reference = None
+    if analysis_type.uses_reference and not args.no_reference:
+        label = "reference: the ideal-joint mechanism at the same saved times"
+        with phases.phase("reference", label, split_compile=True):
+            reference = reference_run(scene, params, trajectory.ts)
+            if reference is not None:
+                reference.q.block_until_ready()
+    analysis = analysis_type(scene, params, mechanism, trajectory, reference)
     with phases.phase("outputs", "outputs: summary quantities, trajectory.npz"):
-        summary.update(scene.summary(params, mechanism, trajectory))
+        summary.update(analysis.summary())
         atomic_write_npz(
             f"{out}/trajectory.npz",
             t=trajectory.ts,
@@ -209,7 +215,7 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
             lam=trajectory.lam,
         )
     with phases.phase("plots"):
-        figures = scene.plot(params, mechanism, trajectory, out)
+        figures = analysis.plot(out)
     summary["phases"] = dict(phases.durations)
     summary["wall_time_s"] = phases.total()
     summary["units"] = units_of(summary)

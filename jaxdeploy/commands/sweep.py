@@ -14,11 +14,10 @@ from ._args import (
     add_step_control,
     check_used,
     integer_at_least,
-    parse_assignments,
-    parse_pairs,
     positive,
     refuse,
-    step_control,
+    scene_of,
+    scene_settings,
 )
 
 NAME = "sweep"
@@ -170,28 +169,27 @@ def run(args) -> int:
         except ValueError as err:
             return refuse(f"--distributed: {err}")
 
+    import numpy as np
+
+    from ..analysis import analysis_class
+    from ..batch import reference_run
     from ..io import default_output_dir
-    from ..scenes import SCENES, get_scene
     from ..sweep import DEFAULT_CHUNK_SIZE, DEFAULT_POLICY, grid_cases, parse_policy, sweep
     from ._results import run_quantities
 
     # Every refusal happens before anything is written or compiled (the ideal reference of an
     # --objective is a simulation: it comes after the checks).
-    if args.scene not in SCENES:
-        return refuse(f"unknown scene {args.scene!r}; valid: {', '.join(sorted(SCENES))}")
     if args.resume and args.out is None:
         return refuse("--resume continues the sweep in --out: give --out")
     try:
-        scene = get_scene(args.scene, **parse_pairs(args.scene_option, "--scene-option"))
-        fixed = parse_assignments(args.set)
+        scene = scene_of(args.scene, args)
+        fixed, _, control = scene_settings(scene, args)
         grid = parse_grid(args.grid, fixed)
         cases = grid_cases(grid)
         rows = zip(*cases.values(), strict=True)
         for row in rows:  # names and ranges of every case (cheap: no simulation)
             scene.resolve_params({**fixed, **dict(zip(cases, row, strict=True))})
-        check_used(scene, fixed, "--set")
         check_used(scene, grid, "--grid")
-        control = step_control(args, scene)
         policy = DEFAULT_POLICY if args.policy is None else args.policy
         parse_policy(policy)
         objective = None
@@ -205,11 +203,30 @@ def run(args) -> int:
     out = args.out or default_output_dir("sweep", scene.name)
     evaluate, features = None, None
 
+    analysis_type = analysis_class(scene)
+    # The ideal-joint reference of the cases' analysis, one per set of the parameters the
+    # ideal mechanism uses (a sweep over the hinges' contact shares one).
+    ideal = scene.ideal_counterpart() if analysis_type.uses_reference else None
+    references = {}
+
+    def reference_for(params, trajectory):
+        if ideal is None:
+            return None
+        unused = ideal.ignored_params()
+        used = [(k, float(v)) for k, v in sorted(params.items()) if k in ideal.params]
+        key = (tuple(kv for kv in used if kv[0] not in unused), np.asarray(trajectory.ts).tobytes())
+        if key not in references:
+            references[key] = reference_run(scene, params, trajectory.ts)
+        return references[key]
+
     def summarize(params, trajectory):
         # What `jaxdeploy simulate` would report for this case (docs/results.md).
         quantities = run_quantities(trajectory)
         try:
-            quantities.update(scene.summary(params, scene.build(params), trajectory))
+            reference = reference_for(params, trajectory)
+            mechanism = scene.build(params)
+            analysis = analysis_type(scene, params, mechanism, trajectory, reference)
+            quantities.update(analysis.summary())
         except Exception:
             # A failed case's states past the failure may be NaN and leave nothing to
             # summarize: it keeps its status and steps (and null for the rest). A successful

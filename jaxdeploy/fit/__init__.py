@@ -12,6 +12,7 @@ from ._data import MeasurementError, Measurements, load_measurements
 from ._derivatives import central_differences, output_function, parameter_jacobian
 from ._fit import FitResult, fit, levenberg_marquardt, tolerance_check
 from ._parameters import FitParameter, check_not_ignored, make_parameters, parse_param_spec
+from ._plots import plot_fit
 from ._residuals import Comparison, ResidualSpec
 from ._schedule import RTOL_FLOOR, choose_tolerance, impact_horizons, onset_times, run_channels
 from ._synthetic import model_channels, synthesize
@@ -39,5 +40,6 @@ __all__ = [
     "output_function",
     "parameter_jacobian",
     "parse_param_spec",
+    "plot_fit",
     "synthesize",
 ]

@@ -1,6 +1,7 @@
 """Instruments for simulated runs: energy bookkeeping (`EnergyMeter`, `metered`,
-`energy_balance`), a step-size log (`StepClock`, `add_clock`) and the quantities whose
-extremes a run tracks (`extremes_at`, `merge_extremes`).
+`energy_balance`), a step-size log (`StepClock`, `add_clock`), the quantities whose
+extremes a run tracks (`extremes_at`, `merge_extremes`) and the clearance joints' contact
+quantities at saved states (`contact_history`).
 
 **Energy.**
 The balance of a mechanism whose ideal joints are scleronomic (no driving constraints):
@@ -268,6 +269,39 @@ def energy_moved(balance: dict) -> float:
     (a residual relative to E0 alone would be meaningless for a mechanism released from rest)."""
     kinetic, dissipated = np.asarray(balance["kinetic"]), np.asarray(balance["dissipated"])
     return float(np.max(kinetic + dissipated) + np.max(np.abs(np.asarray(balance["injected"]))))
+
+
+def contact_history(mechanism: Mechanism, q, v, memory) -> dict[int, dict]:
+    """For every clearance joint (by element index): eccentricity (N, 2), penetration,
+    penetration rate, sliding velocity, normal force and friction force (N,) at the saved
+    states `q`, `v` (N, n) with their saved `memory` (impact velocities). The forces are net
+    of the bore's near and far side (`RevoluteClearance.contact_forces`; the far side is zero
+    unless the clearance is below ~3σ)."""
+    return {
+        index: _joint_history(mechanism, index, q, v, memory)
+        for index in mechanism.find(RevoluteClearance)
+    }
+
+
+# Compiled once per mechanism structure and joint, not per call: a sweep evaluates it for
+# every case (the parameters are leaves of `mechanism`, so new values reuse the program).
+@eqx.filter_jit
+def _joint_history(mechanism, index, q, v, memory):
+    joint = mechanism.elements[index]
+
+    def at(q, v, memory):
+        kin = mechanism.kinematics(q, v)
+        fn, ft, g = joint.contact_forces(kin, memory[index])
+        return {
+            "eccentricity": g.eccentricity,
+            "penetration": g.penetration,
+            "penetration_rate": g.penetration_rate,
+            "sliding_velocity": g.sliding_velocity,
+            "normal_force": fn,
+            "friction_force": jnp.asarray(ft) + 0.0 * fn,
+        }
+
+    return jax.vmap(at)(q, v, memory)
 
 
 def extremes_at(mechanism: Mechanism, q, v, qdd, memory) -> dict:

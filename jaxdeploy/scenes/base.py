@@ -1,5 +1,6 @@
 """What a scene is: a mechanism builder with default parameters, an initial state, a default
-step control, and the headline numbers and plots of a run.
+step control and named output channels. Its headline numbers and figures are analysis
+(`jaxdeploy.analysis`), which finds them by the scene's name.
 
 Parameters are a flat `{name: value}` mapping in SI units. `build(params)` runs at trace time:
 it may read concrete values to decide what to compose (a friction coefficient that is exactly
@@ -138,8 +139,7 @@ class Scene(abc.ABC):
             )
         return {n: channels[n] for n in names}
 
-    def summary(self, params, mechanism, trajectory) -> dict:
-        return {}
-
-    def plot(self, params, mechanism, trajectory, out_dir) -> list[str]:
-        return []
+    def ideal_counterpart(self) -> Scene | None:
+        """The scene's mechanism with ideal joints (a reference its runs are compared with),
+        or None for a scene without one."""
+        return None

@@ -34,6 +34,7 @@ from ..mechanism import (
     Revolute,
     RevoluteClearance,
     consistent_state,
+    contact_history,
 )
 from ..solvers.step_control import StepControl
 from ._contact import (
@@ -419,8 +420,6 @@ class DeployArray(Scene):
         v_P = ṙ + θ̇ A′s, a_P = r̈ + θ̈ A′s − θ̇² A s, with A the rotation matrix and
         A′s = perp(A s).
         """
-        from ..analysis.contact_forces import clearance_joint_history
-
         out = super().channels(mechanism, trajectory)
         q, v, qdd = trajectory.q, trajectory.v, trajectory.qdd
         out["alpha"] = deployment_angle(q)
@@ -438,21 +437,20 @@ class DeployArray(Scene):
             out[f"{panel}_tip_ax"] = qdd[:, 3 * k] - omega_dot * arm_y - omega**2 * arm_x
             out[f"{panel}_tip_ay"] = qdd[:, 3 * k + 1] + omega_dot * arm_x - omega**2 * arm_y
         joint_names = list(JOINTS)  # build() appends one element per joint, in this order
-        for index, history in clearance_joint_history(mechanism, trajectory).items():
+        histories = contact_history(mechanism, q, v, trajectory.memory)
+        for index, history in histories.items():
             owner = self.clearance_joints[joint_names[index]]
             out[f"{owner}_normal_force"] = history["normal_force"]
             out[f"{owner}_penetration"] = history["penetration"]
         return out
 
-    def summary(self, params, mechanism, trajectory):
-        from ..analysis.deploy_array import deploy_array_summary
+    # The deployment angle α [rad] at which the root latch engages (`alpha` channel).
+    lock_angle = GEOMETRY["latch"]["engage_alpha"]
 
-        return deploy_array_summary(self, params, mechanism, trajectory)
-
-    def plot(self, params, mechanism, trajectory, out_dir):
-        from ..analysis.deploy_array import plot_deploy_array
-
-        return plot_deploy_array(self, params, mechanism, trajectory, out_dir)
+    def ideal_counterpart(self):
+        """The same array with ideal joints and the same latch model: the reference whose
+        deviations are the study's outputs (the run differs from it by its joints only)."""
+        return DeployArray(ideal=True, latch=self.latch)
 
 
 def deployment_angle(q):

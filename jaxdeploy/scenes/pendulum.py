@@ -6,8 +6,6 @@ and constraint drift of the integrators.
 
 from __future__ import annotations
 
-import equinox as eqx
-import jax
 import jax.numpy as jnp
 
 from ..mechanism import Body, Gravity, Mechanism, Revolute, consistent_state
@@ -48,13 +46,3 @@ class Pendulum(Scene):
         half = 0.5 * params["length"]
         q_guess = jnp.stack([half * jnp.cos(angle), half * jnp.sin(angle), angle])
         return consistent_state(mechanism, q_guess, fixed=(2,))
-
-    def summary(self, params, mechanism, trajectory):
-        return {"max_constraint_violation": float(_largest_residual(mechanism, trajectory.q))}
-
-
-# Compiled once per mechanism structure, not per call: a sweep summarizes every case with it.
-@eqx.filter_jit
-def _largest_residual(mechanism, q):
-    """max |Φ(q)| over the saved states `q` (N, n) [m]."""
-    return jnp.max(jnp.abs(jax.vmap(lambda qi: mechanism.constraints(qi, 0.0))(q)))

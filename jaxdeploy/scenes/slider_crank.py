@@ -217,16 +217,6 @@ class SliderCrank(Scene):
             return state
         return consistent_state(mechanism, state.q, state.v)
 
-    def summary(self, params, mechanism, trajectory):
-        from ..analysis.slider_crank import slider_crank_summary
-
-        return slider_crank_summary(self, self.complete(params), mechanism, trajectory)
-
-    def plot(self, params, mechanism, trajectory, out_dir):
-        from ..analysis.slider_crank import plot_slider_crank
-
-        return plot_slider_crank(self, self.complete(params), mechanism, trajectory, out_dir)
-
 
 def ideal_slider_kinematics(crank_length, rod_length, crank_speed, t):
     """Closed-form in-line slider-crank kinematics from top dead centre (`x(θ)` differentiated
