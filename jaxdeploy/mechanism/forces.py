@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+import equinox as eqx
 import jax.numpy as jnp
 
 from .._validation import check_nonnegative, check_positive
@@ -195,7 +196,48 @@ class AppliedForce(AbstractElement):
         return (self.body,)
 
 
-class Latch(AbstractElement):
+class AbstractLatch(AbstractElement):
+    """What every deployment latch shares: the hinge angle `α = θ_b − θ_a − angle_offset`,
+    engagement for good at the end of the step in which `direction·(α − α_L) ≥ 0` (memory
+    `engaged` ∈ {0, 1}), and from then on the lock torque `τ = −k_L (α − α_L) − c_L α̇` on
+    body_b (reaction on body_a). Subclasses (`Latch`, `PreloadedLatch`) declare the fields and
+    add what they apply besides. They also have `damping` c_L, `angle_offset` and `direction`
+    (fields with defaults, so declared by the subclasses alone: an abstract field here would
+    fix their place in the constructor before the subclasses' own fields without defaults)."""
+
+    body_a: eqx.AbstractVar[str]
+    body_b: eqx.AbstractVar[str]
+    lock_angle: eqx.AbstractVar[float]
+    stiffness: eqx.AbstractVar[float]
+    has_memory: ClassVar[bool] = True
+    # Engagement happens at a step boundary, at an overshoot bounded by that step's rotation.
+    switch_flags: ClassVar[tuple[str, ...]] = ("engaged",)
+
+    def _angle(self, kin: Kinematics):
+        return relative_angle(kin, self.body_a, self.body_b, self.angle_offset)
+
+    def _reached(self, kin: Kinematics):
+        alpha, _ = self._angle(kin)
+        return self.direction * (alpha - self.lock_angle) >= 0
+
+    def _engaged_at(self, kin: Kinematics):
+        """`engaged` of a state from which no step has been taken yet."""
+        return jnp.where(self._reached(kin), 1.0, 0.0)
+
+    def _engaged_after(self, memory, kin: Kinematics):
+        """`engaged` after an accepted step ending at `kin`: once engaged, for good."""
+        return jnp.maximum(memory["engaged"], self._engaged_at(kin))
+
+    def _lock_wrenches(self, kin: Kinematics, engaged) -> list:
+        alpha, rate = self._angle(kin)
+        torque = -self.stiffness * (alpha - self.lock_angle) - self.damping * rate
+        return _torque_pair(self.body_a, self.body_b, engaged * torque)
+
+    def bodies(self):
+        return (self.body_a, self.body_b)
+
+
+class Latch(AbstractLatch):
     """Deployment latch: once the hinge angle reaches `lock_angle` it engages for good and
     holds the hinge with a stiff rotational spring–damper (a penalty model of ours;
     docs/deploy_array_geometry.md §7 sets its numbers):
@@ -214,32 +256,19 @@ class Latch(AbstractElement):
     damping: float = param(default=0.0)
     angle_offset: float = param(default=0.0)
     direction: int = static(default=1)
-    has_memory: ClassVar[bool] = True
-    # Engagement happens at a step boundary, at an overshoot bounded by that step's rotation.
-    switch_flags: ClassVar[tuple[str, ...]] = ("engaged",)
 
     def __check_init__(self):
         check_positive("Latch.stiffness", self.stiffness, "N m/rad")
         check_nonnegative("Latch.damping", self.damping, "N m s/rad")
 
-    def _angle(self, kin: Kinematics):
-        return relative_angle(kin, self.body_a, self.body_b, self.angle_offset)
-
-    def _reached(self, kin: Kinematics):
-        alpha, _ = self._angle(kin)
-        return self.direction * (alpha - self.lock_angle) >= 0
-
     def init_memory(self, kin: Kinematics):
-        return {"engaged": jnp.where(self._reached(kin), 1.0, 0.0)}
+        return {"engaged": self._engaged_at(kin)}
 
     def memory_after_step(self, memory, kin: Kinematics, step):
-        engaged = jnp.maximum(memory["engaged"], jnp.where(self._reached(kin), 1.0, 0.0))
-        return {"engaged": engaged}
+        return {"engaged": self._engaged_after(memory, kin)}
 
     def wrenches(self, kin: Kinematics, t, memory):
-        alpha, rate = self._angle(kin)
-        torque = -self.stiffness * (alpha - self.lock_angle) - self.damping * rate
-        return _torque_pair(self.body_a, self.body_b, memory["engaged"] * torque)
+        return self._lock_wrenches(kin, memory["engaged"])
 
     def potential_energy(self, kin: Kinematics, memory):
         """`V = ½ k_L (α − α_L)²` once engaged, 0 before. Engaging at an overshoot `α − α_L`
@@ -247,11 +276,8 @@ class Latch(AbstractElement):
         alpha, _ = self._angle(kin)
         return memory["engaged"] * 0.5 * self.stiffness * (alpha - self.lock_angle) ** 2
 
-    def bodies(self):
-        return (self.body_a, self.body_b)
 
-
-class PreloadedLatch(AbstractElement):
+class PreloadedLatch(AbstractLatch):
     """Deployment latch that holds the hinge angle *and* presses the hinge to one side of its
     clearance, as the spring-loaded latches of deployable arrays do (a roller or pawl driven
     by the latch spring into a notch of the hinge fitting; preloading the hinge removes its
@@ -296,8 +322,6 @@ class PreloadedLatch(AbstractElement):
     damping: float = param(default=0.0)
     angle_offset: float = param(default=0.0)
     direction: int = static(default=1)
-    has_memory: ClassVar[bool] = True
-    switch_flags: ClassVar[tuple[str, ...]] = ("engaged",)
 
     def __check_init__(self):
         check_nonnegative("PreloadedLatch.stiffness", self.stiffness, "N m/rad")
@@ -312,13 +336,6 @@ class PreloadedLatch(AbstractElement):
     @property
     def roller_body(self) -> str:
         return self.body_b if self.preload_body == self.body_a else self.body_a
-
-    def _angle(self, kin: Kinematics):
-        return relative_angle(kin, self.body_a, self.body_b, self.angle_offset)
-
-    def _reached(self, kin: Kinematics):
-        alpha, _ = self._angle(kin)
-        return self.direction * (alpha - self.lock_angle) >= 0
 
     def _point(self, kin: Kinematics):
         return kin.position(self.preload_body, self.preload_point)
@@ -335,21 +352,19 @@ class PreloadedLatch(AbstractElement):
 
     def init_memory(self, kin: Kinematics):
         return {
-            "engaged": jnp.where(self._reached(kin), 1.0, 0.0),
+            "engaged": self._engaged_at(kin),
             "anchor": self._in_roller_frame(kin, self._point(kin)),
         }
 
     def memory_after_step(self, memory, kin: Kinematics, step):
-        engaged = jnp.maximum(memory["engaged"], jnp.where(self._reached(kin), 1.0, 0.0))
+        engaged = self._engaged_after(memory, kin)
         newly = (engaged > 0.5) & (memory["engaged"] < 0.5)
         here = self._in_roller_frame(kin, self._point(kin))
         return {"engaged": engaged, "anchor": jnp.where(newly, here, memory["anchor"])}
 
     def wrenches(self, kin: Kinematics, t, memory):
         engaged = memory["engaged"]
-        alpha, rate = self._angle(kin)
-        torque = -self.stiffness * (alpha - self.lock_angle) - self.damping * rate
-        out = _torque_pair(self.body_a, self.body_b, engaged * torque)
+        out = self._lock_wrenches(kin, engaged)
         f = engaged * self._force(kin)
         p = self._point(kin)
         out.append(Wrench(self.preload_body, force=f, point=p))
@@ -367,9 +382,6 @@ class PreloadedLatch(AbstractElement):
         anchor = kin.origin(self.roller_body) + rotate(theta, memory["anchor"])
         work = jnp.dot(self._force(kin), self._point(kin) - anchor)
         return memory["engaged"] * (0.5 * self.stiffness * (alpha - self.lock_angle) ** 2 - work)
-
-    def bodies(self):
-        return (self.body_a, self.body_b)
 
 
 class HingeFriction(AbstractElement):
