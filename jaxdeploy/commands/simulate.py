@@ -7,6 +7,8 @@ import math
 import os
 import sys
 
+import numpy as np
+
 from ._args import (
     SCENE_OPTION_HELP,
     SET_HELP,
@@ -157,9 +159,32 @@ def run(args) -> int:
     return _simulate(args, scene, params, control, t_end, mechanism, initial, out, phases)
 
 
+def _reference(args, scene, params, trajectory, phases):
+    """The ideal-joint reference run at the run's saved times (`batch.reference_run`), read
+    from the reference cache when it holds it (`_reference_cache`); None with
+    `--no-reference`."""
+    from ..batch import reference_run
+    from . import _reference_cache
+
+    if args.no_reference:
+        return None
+    ts = np.asarray(trajectory.ts)
+
+    def compute():
+        label = "reference: the ideal-joint mechanism at the same saved times"
+        with phases.phase("reference", label, split_compile=True):
+            run = reference_run(scene, params, ts)
+            run.q.block_until_ready()
+        return run
+
+    reference, source = _reference_cache.reference(scene, params, ts, compute)
+    if source != "computed":
+        phases.say("reference: the ideal-joint mechanism, from the reference cache")
+    return reference
+
+
 def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phases) -> int:
     from ..analysis import analysis_class
-    from ..batch import reference_run
     from ..io import (
         atomic_write_json,
         atomic_write_npz,
@@ -197,12 +222,8 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
     }
     analysis_type = analysis_class(scene)
     reference = None
-    if analysis_type.uses_reference and not args.no_reference:
-        label = "reference: the ideal-joint mechanism at the same saved times"
-        with phases.phase("reference", label, split_compile=True):
-            reference = reference_run(scene, params, trajectory.ts)
-            if reference is not None:
-                reference.q.block_until_ready()
+    if analysis_type.uses_reference and scene.ideal_counterpart() is not None:
+        reference = _reference(args, scene, params, trajectory, phases)
     analysis = analysis_type(scene, params, mechanism, trajectory, reference)
     with phases.phase("outputs", "outputs: summary quantities, trajectory.npz"):
         summary.update(analysis.summary())

@@ -175,6 +175,7 @@ def run(args) -> int:
     from ..batch import reference_run
     from ..io import default_output_dir
     from ..sweep import DEFAULT_CHUNK_SIZE, DEFAULT_POLICY, grid_cases, parse_policy, sweep
+    from . import _reference_cache
     from ._results import run_quantities
 
     # Every refusal happens before anything is written or compiled (the ideal reference of an
@@ -204,20 +205,18 @@ def run(args) -> int:
     evaluate, features = None, None
 
     analysis_type = analysis_class(scene)
-    # The ideal-joint reference of the cases' analysis, one per set of the parameters the
-    # ideal mechanism uses (a sweep over the hinges' contact shares one).
-    ideal = scene.ideal_counterpart() if analysis_type.uses_reference else None
-    references = {}
+    with_reference = analysis_type.uses_reference and scene.ideal_counterpart() is not None
 
     def reference_for(params, trajectory):
-        if ideal is None:
+        # The ideal-joint reference (`_reference_cache`): one per set of the parameters the
+        # ideal mechanism uses, so a sweep over the hinges' contact shares one.
+        if not with_reference:
             return None
-        unused = ideal.ignored_params()
-        used = [(k, float(v)) for k, v in sorted(params.items()) if k in ideal.params]
-        key = (tuple(kv for kv in used if kv[0] not in unused), np.asarray(trajectory.ts).tobytes())
-        if key not in references:
-            references[key] = reference_run(scene, params, trajectory.ts)
-        return references[key]
+        ts = np.asarray(trajectory.ts)
+        run, _ = _reference_cache.reference(
+            scene, params, ts, lambda: reference_run(scene, params, ts)
+        )
+        return run
 
     def summarize(params, trajectory):
         # What `jaxdeploy simulate` would report for this case (docs/results.md).

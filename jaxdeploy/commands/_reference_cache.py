@@ -1,0 +1,151 @@
+"""The reference run of `jaxdeploy simulate`, kept on disk between runs.
+
+deploy_array's deviations from the ideal mechanism need a second simulation, of the same
+array with ideal joints (`batch.reference_run`). It depends on the parameters the ideal array
+uses — not on the clearances and roughnesses a study varies — on the saved
+times and on its step control, so one computed reference serves every later run that differs
+from it only in its joints. It is stored under the key of everything it is a function of: the
+package's code (every .py and .json file under jaxdeploy/, so a code change is a miss), the
+versions of jax/jaxlib/diffrax/equinox/numpy, the platform and device, `EQX_ON_ERROR`, the
+ideal scene's name, options and the parameters it uses (not those its options make
+irrelevant), the step control, and the saved times. A hit returns the arrays the simulation
+wrote, bit for bit. Within one process (a sweep summarizing its cases) a reference is also
+kept in memory.
+
+Location: beside the compilation cache (`_compilation_cache.cache_dir()` + `-references`);
+off when that cache is off (`JAXDEPLOY_CACHE_DIR=off`). A cache that cannot be written is
+skipped (computing the reference again is slower, not wrong).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+import pathlib
+import platform
+from typing import NamedTuple
+
+import numpy as np
+
+from .._compilation_cache import cache_dir
+
+
+class StoredRun(NamedTuple):
+    """A reference run read back from the cache: the saved times `ts` [s] and states `q`,
+    `v`, `qdd`, `lam` (as `Trajectory` has them) and its `status()`."""
+
+    ts: np.ndarray
+    q: np.ndarray
+    v: np.ndarray
+    qdd: np.ndarray
+    lam: np.ndarray
+    status_text: str
+
+    @property
+    def ok(self) -> bool:
+        return self.status_text == "ok"
+
+    def status(self) -> str:
+        return self.status_text
+
+
+def folder() -> str | None:
+    base = cache_dir()
+    return None if base is None else base.rstrip(os.sep) + "-references"
+
+
+@functools.cache
+def _code_digest() -> str:
+    package = pathlib.Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for path in sorted(package.rglob("*")):
+        if path.suffix in (".py", ".json") and "__pycache__" not in path.parts:
+            digest.update(str(path.relative_to(package)).encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def key(scene, params, ts, control) -> str:
+    """The cache key of `scene`'s reference run (see the module docstring)."""
+    import diffrax
+    import equinox
+    import jax
+    import jaxlib
+
+    ideal = scene.ideal_counterpart()
+    unused = ideal.ignored_params()
+    shared = {
+        k: float(v) for k, v in sorted(params.items()) if k in ideal.params and k not in unused
+    }
+    record = {
+        "code": _code_digest(),
+        "versions": [
+            jax.__version__,
+            jaxlib.__version__,
+            diffrax.__version__,
+            equinox.__version__,
+            np.__version__,
+        ],
+        "platform": [platform.platform(), platform.machine(), str(jax.devices()[0])],
+        "eqx_on_error": os.environ.get("EQX_ON_ERROR"),
+        "scene": [ideal.name, ideal.options, shared],
+        "control": [control.to_json(), repr(control)],
+        "ts": hashlib.sha256(np.ascontiguousarray(ts, dtype=np.float64).tobytes()).hexdigest(),
+    }
+    return hashlib.sha256(json.dumps(record, sort_keys=True, default=str).encode()).hexdigest()
+
+
+_in_memory: dict = {}
+
+
+def reference(scene, params, ts, compute):
+    """`scene`'s reference run at the saved times `ts`: from memory, from the disk, or
+    `compute()` (then kept). **Returns:** `(run, source)`, source "memory", "disk" or
+    "computed"."""
+    cache_key = key(scene, params, ts, scene.ideal_counterpart().default_control)
+    if cache_key in _in_memory:
+        return _in_memory[cache_key], "memory"
+    run, source = load(cache_key), "disk"
+    if run is None:
+        run, source = compute(), "computed"
+        store(cache_key, run)
+    _in_memory[cache_key] = run
+    return run, source
+
+
+def load(cache_key: str) -> StoredRun | None:
+    where = folder()
+    path = None if where is None else os.path.join(where, f"{cache_key}.npz")
+    if path is None or not os.path.exists(path):
+        return None
+    try:
+        with np.load(path) as data:
+            arrays = [data[k] for k in ("ts", "q", "v", "qdd", "lam")]
+            return StoredRun(*arrays, str(data["status"]))
+    except (OSError, KeyError, ValueError):
+        return None  # unreadable: compute it again
+
+
+def store(cache_key: str, run) -> None:
+    """Keep a successful reference run; a failed one is never stored (it is computed again
+    and its failure reported again)."""
+    from ..io import atomic_write_npz
+
+    where = folder()
+    if where is None or not run.ok:
+        return
+    try:
+        os.makedirs(where, exist_ok=True)
+        atomic_write_npz(
+            os.path.join(where, f"{cache_key}.npz"),
+            ts=run.ts,
+            q=run.q,
+            v=run.v,
+            qdd=run.qdd,
+            lam=run.lam,
+            status=np.array(run.status()),
+        )
+    except OSError:
+        pass

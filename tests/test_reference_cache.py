@@ -1,0 +1,66 @@
+"""`jaxdeploy simulate`'s reference cache: a stored reference comes back bit for bit, its key
+changes with whatever the reference depends on (and not with the clearance joints' own
+parameters), a failed reference is never stored, and the cache is off with the compilation
+cache."""
+
+import numpy as np
+
+from jaxdeploy.commands import _reference_cache as cache
+from jaxdeploy.scenes import DeployArray
+
+
+class _Run:
+    def __init__(self, ok=True):
+        rng = np.random.default_rng(0)
+        self.ts = np.linspace(0.0, 2.0, 5)
+        self.q, self.v, self.qdd = (rng.standard_normal((5, 9)) for _ in range(3))
+        self.lam = rng.standard_normal((5, 8))
+        self.ok = ok
+
+    def status(self):
+        return "ok" if self.ok else "failed after t = 1 s: max_steps_reached"
+
+
+def test_stored_reference_comes_back_bit_for_bit(tmp_path, monkeypatch):
+    monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", str(tmp_path / "xla"))
+    scene = DeployArray()
+    params = scene.resolve_params()
+    run = _Run()
+    key = cache.key(scene, params, run.ts, scene.default_control)
+    assert cache.load(key) is None
+    cache.store(key, run)
+    back = cache.load(key)
+    for name in ("ts", "q", "v", "qdd", "lam"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(run, name))
+    assert back.status() == "ok" and back.ok
+
+
+def test_key_follows_what_the_reference_depends_on(tmp_path, monkeypatch):
+    monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", str(tmp_path / "xla"))
+    scene = DeployArray()
+    params = scene.resolve_params()
+    ts = np.linspace(0.0, 2.0, 2001)
+    control = scene.default_control
+    base = cache.key(scene, params, ts, control)
+    # The clearance joints' own parameters do not change the ideal reference.
+    assert cache.key(scene, {**params, "panel1_clearance": 2e-5}, ts, control) == base
+    changed = [
+        cache.key(scene, {**params, "latch_stiffness": 2 * params["latch_stiffness"]}, ts, control),
+        cache.key(scene, params, ts[:-1], control),
+        cache.key(scene, params, ts, control.replace(rtol=1e-8)),
+        cache.key(DeployArray(latch="angle_only"), params, ts, control),
+    ]
+    assert base not in changed and len(set(changed)) == len(changed)
+
+
+def test_failed_reference_is_not_stored_and_cache_off_stores_nothing(tmp_path, monkeypatch):
+    monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", str(tmp_path / "xla"))
+    scene = DeployArray()
+    params = scene.resolve_params()
+    key = cache.key(scene, params, _Run().ts, scene.default_control)
+    cache.store(key, _Run(ok=False))
+    assert cache.load(key) is None
+    monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", "off")
+    assert cache.folder() is None
+    cache.store(key, _Run())
+    assert cache.load(key) is None
