@@ -104,7 +104,10 @@ def _pendulum_reference(t_end, gravity=9.81, length=1.0):
     return sol.y[0, -1]
 
 
-def test_pendulum_second_order_and_bounded_drift():
+@pytest.mark.parametrize("project", [None, True])
+def test_pendulum_second_order_and_bounded_drift(project):
+    """Fixed steps: second order, with the default (no velocity projection on fixed steps)
+    and with the projection forced on."""
     scene = Pendulum()
     params = scene.resolve_params()
     mech = scene.build(params)
@@ -113,7 +116,8 @@ def test_pendulum_second_order_and_bounded_drift():
     steps = np.array([4e-3, 2e-3, 1e-3])
     errors, drift = [], []
     for h in steps:
-        tr = simulate(mech, s0, 1.0, dt=h, n_save=11)
+        solver = None if project is None else GeneralizedAlpha(project_velocities=True)
+        tr = simulate(mech, s0, 1.0, dt=h, n_save=11, solver=solver)
         assert tr.ok
         errors.append(abs(float(tr.q[-1, 2]) - theta_ref))
         drift.append(max(float(jnp.max(jnp.abs(mech.constraints(q, 0.0)))) for q in tr.q))
@@ -127,7 +131,8 @@ def test_pendulum_second_order_and_bounded_drift():
 def test_velocity_projection_removes_the_index3_roundoff(h):
     """One step of length h from a consistent pendulum state: the plain index-3 step leaves
     the velocity constraint violated by round-off of Φ(q) = 0 amplified by γ' ~ 2/h (it grows
-    as h shrinks); with `project_velocities` (the default) the violation is round-off of q̇,
+    as h shrinks); with `project_velocities` (the default with the error estimate, i.e. on
+    adaptive steps) the violation is round-off of q̇,
     and the velocities differ from the plain step's by no more than that violation."""
     scene = Pendulum()
     params = scene.resolve_params()
