@@ -38,18 +38,18 @@ def test_sweep_as_two_processes_loses_and_duplicates_no_case(tmp_path):
     env["JAX_COORDINATOR_ADDRESS"] = f"127.0.0.1:{_free_port()}"
     env["JAX_NUM_PROCESSES"] = "2"
     out = tmp_path / "two"
-    processes = [
-        subprocess.Popen(
-            _command(out, "--distributed"),
-            env={**env, "JAX_PROCESS_ID": str(i)},
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )  # fmt: skip
-        for i in range(2)
-    ]
-    errors = [proc.communicate(timeout=900)[1] for proc in processes]
-    report = "\n".join(f"process {k}: {e[-2000:]}" for k, e in enumerate(errors))
+    # Output to files, not pipes: a process blocked on a full pipe that nobody reads yet
+    # would miss the coordination service's shutdown barrier and take the other one down.
+    logs = [tmp_path / f"process{i}.log" for i in range(2)]
+    processes = []
+    for i, log in enumerate(logs):
+        with open(log, "w") as sink:
+            command = _command(out, "--distributed")
+            processes.append(subprocess.Popen(command, env={**env, "JAX_PROCESS_ID": str(i)},
+                                              stdout=sink, stderr=subprocess.STDOUT))  # fmt: skip
+    for proc in processes:
+        proc.wait(timeout=900)
+    report = "\n".join(f"process {k}: {log.read_text()[-2000:]}" for k, log in enumerate(logs))
     assert all(proc.returncode == 0 for proc in processes), report
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["process_count"] == 2 and len(manifest["devices"]) == 2
@@ -64,8 +64,11 @@ def test_sweep_as_two_processes_loses_and_duplicates_no_case(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     reference = load_sweep(one)
     order, ref_order = np.argsort(two["case"]), np.argsort(reference["case"])
-    for key in ("param_initial_angle", "param_length", "num_steps", "q"):
+    for key in ("param_initial_angle", "param_length", "num_steps"):
         np.testing.assert_array_equal(two[key][order], reference[key][ref_order], err_msg=key)
+    # One process vmaps a chunk's 2 cases on its one device, two processes run 1 case each:
+    # other batch shapes, so the states agree to round-off (measured 3e-15 rad), not bit for bit.
+    np.testing.assert_allclose(two["q"][order], reference["q"][ref_order], rtol=0, atol=1e-12)
 
 
 def test_distributed_environment_is_read_and_checked(monkeypatch):
