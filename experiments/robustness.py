@@ -195,7 +195,7 @@ def _table(records, names):
             "moved (tighter) | Δ outputs vs tighter | ΔD vs tighter | d/ds finite | other "
             "solver | wall [s] |", "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for name in names:
-        r = records.get(name, {"status": "not run (budget)"})
+        r = records.get(name, {"status": "not run (time)"})
         energy = _f(r.get("energy_residual_rel"))
         if "ref_energy_residual_rel" in r:
             energy += f" ({r['ref_energy_residual_rel']:.1e})"
