@@ -469,7 +469,7 @@ SENS_READING = """\
 How to read the check: the lock time is a smooth function of the parameters, and its
 forward-mode derivative in the spring stiffness matches the difference. Everything that
 passes through hinge impacts does not: the unfolding deviations match in the spring stiffness
-to about 20 % but not in the clearance, and the post-lock outputs' pathwise derivatives are
+to 20–30 % but not in the clearance, and the post-lock outputs' pathwise derivatives are
 orders of magnitude above their differences. They are derivatives of one trajectory whose
 impact times move with every parameter (the optimize module's docstring measures such
 derivatives up to 1e15 with adaptive steps); the differences over a 1 % step are the trend a
