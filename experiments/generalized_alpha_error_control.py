@@ -1,6 +1,7 @@
 """How well adaptive generalized-α's error estimate controls the error: error against the
 tolerance, next to the explicit diffrax path, on both benchmark scenes; writes the generated
-block `generalized-alpha-error` of docs/performance.md.
+block `generalized-alpha-error` of docs/generalized_alpha_error.md (its own page: `make bench`
+rewrites docs/performance.md whole).
 
 * slider_crank over the benchmark's reference window (1.5 ms, six impacts), against the
   event-exact numpy model under scipy DOP853 at rtol 1e-13 (`peers.py`);
@@ -28,7 +29,7 @@ from jaxdeploy.io import machine_description, replace_block
 from jaxdeploy.scenes import DeployArray, SliderCrank
 from jaxdeploy.simulation import simulate
 
-DOC = os.path.join(os.path.dirname(__file__), "..", "docs", "performance.md")
+DOC = os.path.join(os.path.dirname(__file__), "..", "docs", "generalized_alpha_error.md")
 DEPLOY_WINDOW = 0.1
 CONFIGS = {  # scene → (solver, rtol) rows
     "slider_crank": [("generalized_alpha", tol) for tol in (1e-5, 1e-6, 1e-7, 1e-8)]
