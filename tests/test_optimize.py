@@ -193,9 +193,10 @@ def test_optimize_command_refuses_bad_input_before_running(tmp_path, capsys):
 
 
 @pytest.mark.slow
-def test_optimize_command_end_to_end_on_a_short_deployment(tmp_path):
+def test_optimize_command_end_to_end_on_a_short_deployment(tmp_path, capsys):
     """Two smoothed steps on panel 2's Ra over a 0.65 s deployment: writes the optimum, the
-    history and the plot; the design stays inside the machinable box."""
+    history and the plot; the design stays inside the machinable box; one progress line per
+    iteration with its count, elapsed time and (after the first, which compiles) an ETA."""
     import json
 
     from jaxdeploy.cli import main
@@ -218,10 +219,13 @@ def test_optimize_command_end_to_end_on_a_short_deployment(tmp_path):
             "1",
             "--out",
             str(out),
-            "--quiet",
         ]
     )
     assert code == 0
+    progress = [line for line in capsys.readouterr().err.splitlines() if line.startswith("[")]
+    assert [line.split("]")[0] for line in progress] == ["[1/2", "[2/2"]
+    assert all("elapsed" in line for line in progress)
+    assert "ETA" not in progress[0] and "ETA" in progress[1]
     record = json.loads((out / "result.json").read_text())
     assert len(record["history"]) == 2 and (out / "history.png").exists()
     assert 0.2e-6 <= record["optimum"]["panel2_ra"] <= 6.3e-6
