@@ -39,6 +39,7 @@ def test_bad_cases_are_refused_before_tracing():
         simulate_batch(Pendulum(), [], 0.1)
 
 
+@pytest.mark.slow  # 17 s of the default suite at 844cb65 (2 cores): kept out of it
 def test_run_scene_differentiates_through_parameters():
     """d θ(t_end) / d initial_angle by AD against central differences."""
     scene = Pendulum()

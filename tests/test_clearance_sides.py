@@ -240,6 +240,7 @@ def test_impact_at_clearance_equal_to_sigma_balances_energy(damping):
     assert float(np.min(np.asarray(traj.v[:, 0]))) < 0.0  # rebounds
 
 
+@pytest.mark.slow  # 68 s of the default suite at 844cb65 (2 cores): kept out of it
 def test_run_derivatives_from_the_centre_match_central_differences():
     """c = σ = 1 µm, slow launch (1 cm/s) from e = 0: the journal sits in two-sided contact,
     then meets the near wall. Forward and reverse mode of the replayed adaptive run agree and

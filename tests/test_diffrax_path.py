@@ -137,6 +137,7 @@ def _central_difference(fn, x, relative_step=1e-4):
     return (fn(x + step) - fn(x - step)) / (2 * step)
 
 
+@pytest.mark.slow  # 24 s of the default suite at 844cb65 (2 cores): kept out of it
 def test_gradient_through_kvaerno_path_matches_finite_differences():
     """d(position after a damped impact)/d(restitution), reverse mode through Kvaerno3 steps
     (root finds differentiated implicitly) and the memory update, against central

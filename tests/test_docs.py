@@ -4,6 +4,7 @@ import pathlib
 import re
 
 import numpy as np
+import pytest
 
 DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs"
 
@@ -13,6 +14,7 @@ def _python_blocks(name):
     return re.findall(r"```python\n(.*?)```", text, flags=re.S)
 
 
+@pytest.mark.slow  # 66 s of the default suite at 844cb65 (2 cores): kept out of it
 def test_mechanism_page_four_bar_runs():
     namespace = {}
     for block in _python_blocks("mechanism.md"):

@@ -27,6 +27,7 @@ from jaxdeploy.fit._residuals import Comparison
 from jaxdeploy.scenes import Impact, Pendulum
 
 
+@pytest.mark.slow  # 27 s of the default suite at 844cb65 (2 cores): kept out of it
 def test_cli_fit_recovers_impact_parameters_within_reported_errors(tmp_path, capsys):
     """Synthetic journal position and acceleration through a damped impact (1 % noise);
     restitution and contact stiffness started far off are recovered within 3 standard
@@ -363,6 +364,7 @@ def test_widths_give_smooth_stages_ending_with_independent_residuals():
             _stages(Namespace(**{**vars(args), **bad}), data)
 
 
+@pytest.mark.slow  # 18 s of the default suite at 844cb65 (2 cores): kept out of it
 def test_continuation_in_smoothing_width_finds_an_impact_the_guess_misses():
     """The journal's acceleration is a spike while it touches the bearing (from t = c/v0).
     With the clearance guessed 4× too large the model's spike lies after the data's: the

@@ -157,6 +157,7 @@ def test_scalar_loss_gradient_is_the_jacobian_contracted():
     np.testing.assert_allclose(grad, jnp.dot(weights, jac), rtol=1e-10)
 
 
+@pytest.mark.slow  # 67 s of the default suite at 844cb65 (2 cores): kept out of it
 def test_impact_adaptive_steps_replayed_match_central_differences():
     """Adaptive steps (the impact scene's default control): forward and reverse mode of the
     replayed run agree with each other to round-off and with central differences over the

@@ -330,6 +330,7 @@ def test_approach_speed_is_right_when_the_onset_step_also_crosses_the_centre():
         assert v_minus == pytest.approx(speed, rel=1e-4), (first_step, v_minus)
 
 
+@pytest.mark.slow  # 30 s of the default suite at 844cb65 (2 cores): kept out of it
 def test_gradients_finite_from_zero_eccentricity_through_contact_onset_and_rebound():
     """The journal starts exactly centred (e = 0), crosses the rough law's onset, impacts and
     rebounds; the gradient with respect to every contact parameter is finite, and its signs are

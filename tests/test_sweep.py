@@ -100,6 +100,7 @@ def test_sweep_definition_records_the_solver():
     assert full["solver"] != StepControl(GeneralizedAlpha(), dt=1e-3).to_json()["solver"]
 
 
+@pytest.mark.slow  # 18 s of the default suite at 844cb65 (2 cores): kept out of it
 def test_sweep_killed_and_resumed_on_four_devices(tmp_path):
     env = _env(tmp_path / "cache")
     full, killed = tmp_path / "full", tmp_path / "killed"
