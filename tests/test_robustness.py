@@ -505,3 +505,24 @@ def test_a_leftover_partial_write_is_not_a_result(tmp_path):
     (out / "summary.json").write_text("{}")
     with pytest.raises(FileExistsError, match="already holds results"):
         check_output_dir(str(out), overwrite=False)
+
+
+def test_a_clocked_pendulum_under_gravity_balances_energy():
+    """The step clock of `add_clock` is bookkeeping, not matter: gravity leaves it alone, so a
+    frictionless pendulum's T + V stays at its initial value (before the fix the clock body fell
+    and its lost potential showed as an energy residual of g²t²/2 per kg)."""
+    from jaxdeploy.mechanism import Gravity
+
+    rod = Body("rod", 1.0, 1.0 / 12.0, {"pin": (-0.5, 0.0)})
+    mech = metered(Mechanism([rod], [Revolute("ground", "O", "rod", "pin"), Gravity()],
+                             {"O": (0.0, 0.0)}))  # fmt: skip
+    init = consistent_state(mech, jnp.array([0.5, 0.0, 0.0]))  # horizontal, at rest
+    clocked, clocked_init = add_clock(mech, init)
+    traj = simulate(clocked, clocked_init, 0.5, rtol=1e-10, atol=1e-12, n_save=11)
+    assert traj.result == dfx.RESULTS.successful
+    balance = energy_balance(clocked, traj.q, traj.v, traj.memory)
+    kinetic = np.asarray(balance["kinetic"])
+    assert kinetic[-1] > 1.0  # the rod has swung down (about 4.9 J at the bottom)
+    assert float(np.max(np.abs(np.asarray(balance["residual"])))) < 1e-6 * kinetic.max()
+    clock_x = np.asarray(traj.q[:, -3])
+    np.testing.assert_allclose(clock_x, np.asarray(traj.ts), rtol=0, atol=1e-12)

@@ -17,6 +17,9 @@ from jaxtyping import Array
 from .._validation import check_positive
 
 GROUND = "ground"
+# The bookkeeping body `add_clock` (meters.py) adds to log accepted steps: it is not matter,
+# so body forces (gravity) leave it alone.
+CLOCK = "clock"
 
 
 def rotation(theta):

@@ -14,13 +14,14 @@ import jax.numpy as jnp
 
 from .._validation import check_nonnegative, check_positive
 from ._fields import param, static
-from .bodies import GROUND, Kinematics, rotate
+from .bodies import CLOCK, GROUND, Kinematics, rotate
 from .element import AbstractElement, Wrench
 from .joints import PointRef
 
 
 class Gravity(AbstractElement):
-    """Uniform gravity `m g` on every moving body (off in the array scenes: it deploys in orbit).
+    """Uniform gravity `m g` on every moving body (off in the array scenes: it deploys in orbit),
+    except the step-logging clock body of `add_clock`, which is not matter.
 
     **Arguments:** `acceleration`: `g` as a 2-vector [m/s²], default `(0, −9.81)`.
     """
@@ -28,7 +29,7 @@ class Gravity(AbstractElement):
     acceleration: tuple = param(default=(0.0, -9.81))
 
     def wrenches(self, kin: Kinematics, t, memory):
-        return [Wrench(body=b.name, force=b.mass * self.acceleration) for b in kin.mechanism.bodies]
+        return [Wrench(body=b.name, force=b.mass * self.acceleration) for b in _massive(kin)]
 
     def coupled_bodies(self):
         # Constant forces: they depend on no coordinate, so the iteration matrix has no term.
@@ -37,7 +38,12 @@ class Gravity(AbstractElement):
     def potential_energy(self, kin: Kinematics, memory):
         """`V = −Σ m_k g·r_k`."""
         g = jnp.asarray(self.acceleration)
-        return -sum(b.mass * jnp.dot(g, kin.origin(b.name)) for b in kin.mechanism.bodies)
+        return -sum(b.mass * jnp.dot(g, kin.origin(b.name)) for b in _massive(kin))
+
+
+def _massive(kin: Kinematics):
+    """The bodies gravity acts on: every moving body but the clock."""
+    return [b for b in kin.mechanism.bodies if b.name != CLOCK]
 
 
 class Spring(AbstractElement):

@@ -51,12 +51,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from .assembly import ConsistentState
-from .bodies import Body, Kinematics
+from .bodies import CLOCK, Body, Kinematics
 from .clearance import RevoluteClearance
 from .element import AbstractElement
 from .system import Mechanism
 
-CLOCK = "clock"
 
 
 class EnergyMeter(AbstractElement):
