@@ -57,7 +57,6 @@ from .element import AbstractElement
 from .system import Mechanism
 
 
-
 class EnergyMeter(AbstractElement):
     """`inner` unchanged, plus a memory that meters the energy its non-conservative forces
     dissipate (`dissipated`) and the energy memory updates put into its potential
