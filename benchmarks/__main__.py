@@ -3,8 +3,8 @@
 * `all [--quick] [--out DIR] [--allow-dirty]`: every measurement, each in a fresh process, then
   the page `DIR/performance.md` with `DIR/bench/work_precision.{json,png}` and
   `DIR/bench/targets.json` (DIR: `docs`, or `results/bench_quick` with `--quick`).
-* `part NAME --json FILE [--quick]`: one measurement (work-precision, batch, ceiling, gradient,
-  simulate) into FILE; used by `all`.
+* `part NAME --json FILE [--quick]`: one measurement (work-precision, andrews, batch, ceiling,
+  gradient, simulate) into FILE; used by `all`.
 """
 
 from __future__ import annotations
@@ -31,15 +31,14 @@ MEASURES = [
     "jaxdeploy/solvers",
     "tests/data/slider_crank_reference.npz",
 ]
-PINNED = ("work-precision", "batch", "ceiling", "gradient")  # one core for both sides
-PARTS = ("work-precision", "batch", "ceiling", "gradient", "simulate")
+PINNED = ("work-precision", "andrews", "batch", "ceiling", "gradient")  # one core, both sides
+PARTS = ("work-precision", "andrews", "batch", "ceiling", "gradient", "simulate")
 CUT = [
     "Work–precision over the first 4 ms of slider_crank only (the reference fixture's fine "
     "grid), not two revolutions, and not deploy_array (its implicit configurations take hours).",
     "Batch over 4 ms of slider_crank; one-at-a-time cost is the mean of 8 cases, not 256; no "
     "`lanes` or `group_size` variants, no two-core batch.",
     "Gradient over 0.2 s of deploy_array, not its 2 s; no check against central differences.",
-    "No Andrews squeezer case (not yet a scene).",
 ]
 
 
@@ -52,6 +51,10 @@ def _part(name: str, quick: bool) -> dict:
         from .work_precision import measure
 
         return measure(quick=quick, repeats=1 if quick else 3)
+    if name == "andrews":
+        from .andrews import measure as andrews
+
+        return andrews(quick=quick, repeats=1 if quick else 3)
     if name == "batch":
         return targets.batch(cases=16 if quick else 256, singles=2 if quick else 8)
     if name == "ceiling":

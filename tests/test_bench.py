@@ -133,3 +133,39 @@ def test_page_renders_every_target_with_its_verdict():
     assert "≤ 15 s | missed: 2× the goal" in text and "≤ 5 s | met" in text
     assert "generalized-α step / Exudyn generalized-α (python force) step" in text  # 0.4
     assert "| 0.40 | ≤ 0.3 | missed: 1.3× the goal |" in text
+
+
+def test_andrews_rows_render_with_the_generalized_alpha_target():
+    def row(family, kind, setting, error, warm):
+        return {"error_rel": error, "family": family, "setting": setting, "kind": kind,
+                "compile_s": 1.0, "first_s": warm + 1.0, "warm_s": warm, "steps": 10,
+                "status": "ok"}  # fmt: skip
+
+    rows = [
+        row(page.ANDREWS_FAMILY, "jaxdeploy", "rtol=1e-10", 2e-7, 0.5),
+        row(page.ANDREWS_FAMILY, "jaxdeploy", "rtol=1e-12", 9e-9, 4.0),
+        row("jaxdeploy Dopri8", "jaxdeploy", "rtol=1e-10", 3e-10, 0.2),
+        row("scipy DOP853", "scipy", "rtol=1e-10", 3e-10, 0.8),
+    ]
+    andrews = {"rows": rows, "error": "max relative", "horizon_s": 0.03}
+    lines = page.andrews_targets(andrews)
+    assert "| 9.00e-09 (best of rtol=1e-10, rtol=1e-12) | ≤ 1e-08 | met |" in lines[0]
+    assert "| 0.25 (0.2 s / 0.8 s; generalized-α 4 s) | ≤ 0.5 | met |" in lines[1]
+    rows[1]["error_rel"] = 2e-8  # generalized-α no longer reaches the target
+    assert "missed: 2× the goal" in page.andrews_targets(andrews)[0]
+    text = "\n".join(page.andrews_section(andrews))
+    assert "## Andrews' squeezing mechanism" in text and "| scipy DOP853 | rtol=1e-10 |" in text
+
+
+@pytest.mark.slow
+def test_andrews_part_runs_quick(tmp_path):
+    """`python -m benchmarks part andrews --quick`: one row per configuration, errors against
+    the Test Set's solution (generalized-α at rtol 1e-6 reaches well below 1e-3, DOP853 at
+    1e-8 below 1e-6)."""
+    from benchmarks.andrews import measure
+
+    result = measure(quick=True, repeats=1, log=lambda *_: None)
+    by = {(r["family"], r["setting"]): r for r in result["rows"]}
+    assert all(r["status"] == "ok" for r in result["rows"]), result["rows"]
+    assert by[(page.ANDREWS_FAMILY, "rtol=1e-06")]["error_rel"] < 1e-3
+    assert by[("scipy DOP853", "rtol=1e-08")]["error_rel"] < 1e-6
