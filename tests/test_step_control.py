@@ -112,3 +112,58 @@ def test_a_step_control_unpacks_as_its_settings():
     assert dict(control) == {"solver": "tsit5", "rtol": 1e-6, "atol": 1e-9, "dt_max": 5e-4}
     assert {**control, "rtol": 1e-8}["rtol"] == 1e-8 and control.get("dt") is None
     assert StepControl(**control) == control
+
+
+def test_auto_chooses_the_method_by_the_tolerance_and_records_it():
+    """`"auto"`: Tsit5 from AUTO_TIGHT_RTOL up and for fixed steps, Dopri8 below it;
+    `"auto:NAME"` keeps NAME above. The run records the method that ran and the rule that
+    chose it, and the record rebuilds the rule (not the method it chose)."""
+    from jaxdeploy.solvers.registry import AUTO_TIGHT_RTOL
+
+    assert StepControl("auto", rtol=AUTO_TIGHT_RTOL).solver_name() == "tsit5"
+    assert StepControl("auto", rtol=0.5 * AUTO_TIGHT_RTOL).solver_name() == "dopri8"
+    assert StepControl("auto", atol=1e-12).solver_name() == "tsit5"  # the controller's rtol 1e-6
+    assert StepControl("auto", dt=1e-3).solver_name() == "tsit5"
+    loose = StepControl("auto:kvaerno5", rtol=1e-6, atol=1e-9)
+    assert loose.solver_name() == "kvaerno5"
+    tight = loose.replace(rtol=1e-10, atol=1e-13)
+    assert tight.solver_name() == "dopri8" and type(tight.make_solver().solver).__name__ == "Dopri8"
+    record = json.loads(json.dumps(tight.to_json(), allow_nan=False))
+    assert record["solver"] == "dopri8" and record["solver_rule"].startswith("auto:kvaerno5: ")
+    assert StepControl.from_json(record) == tight
+    assert StepControl("tsit5", rtol=1e-6).to_json()["solver_rule"] is None
+    with pytest.raises(ValueError, match="after 'auto:' give one of"):
+        StepControl("auto:rk4", rtol=1e-6)
+    with pytest.raises(ValueError, match="after 'auto:' give one of"):
+        StepControl("auto:auto", rtol=1e-6)
+
+
+def test_auto_refuses_a_traced_tolerance():
+    import jax
+
+    def build(rtol):
+        return StepControl("auto", rtol=rtol).make_solver()
+
+    with pytest.raises(ValueError, match="chooses its method by rtol"):
+        jax.jit(lambda r: (build(r), r)[1])(1e-9)
+
+
+def test_slider_crank_default_run_keeps_its_solver_and_a_tight_one_gets_dopri8():
+    """The scene's default (rtol 1e-6) builds the very solver it built before the automatic
+    choice (generalized-α with its defaults); the command line's `--rtol 1e-10 --atol 1e-13`
+    (issue 19's check) runs Dopri8 and says so."""
+    import argparse
+
+    from jaxdeploy.commands._args import add_step_control
+    from jaxdeploy.commands._args import step_control as cli_step_control
+
+    scene = SCENES["slider_crank"]()
+    before = StepControl(rtol=1e-6, atol=1e-9, dt_max=1e-4)
+    assert scene.default_control.make_solver() == before.make_solver()
+    assert scene.default_control.controller() == before.controller()
+    parser = argparse.ArgumentParser()
+    add_step_control(parser)
+    tight = cli_step_control(parser.parse_args(["--rtol", "1e-10", "--atol", "1e-13"]), scene)
+    assert tight.to_json()["solver"] == "dopri8"
+    forced = ["--rtol", "1e-10", "--atol", "1e-13", "--solver", "generalized_alpha"]
+    assert cli_step_control(parser.parse_args(forced), scene).solver_name() == "generalized_alpha"

@@ -73,11 +73,11 @@ def integer_at_least(flag: str, low: int, high: int | None = None):
 
 
 def _solver_name(text: str) -> str:
-    from ..solvers.registry import SOLVER_NAMES
+    from ..solvers.registry import SOLVER_NAMES, is_solver_name
 
-    if text not in SOLVER_NAMES:
+    if not is_solver_name(text):
         raise argparse.ArgumentTypeError(
-            f"--solver = {text!r} is unknown; valid: {', '.join(SOLVER_NAMES)}"
+            f"--solver = {text!r} is unknown; valid: {', '.join(SOLVER_NAMES)} or auto:NAME"
         )
     return text
 
@@ -98,7 +98,9 @@ def add_step_control(parser) -> None:
         default=None,
         metavar="NAME",
         help="generalized_alpha (index-3, implicit), or on the index-1 path tsit5, dopri5, "
-        "dopri8 (explicit), kvaerno3, kvaerno4, kvaerno5 (implicit)",
+        "dopri8 (explicit), kvaerno3, kvaerno4, kvaerno5 (implicit); auto: tsit5, or dopri8 "
+        "at a tight rtol (auto:NAME: NAME instead of tsit5; docs/solver_by_tolerance.md). "
+        "summary.json records the solver that ran",
     )
     group.add_argument(
         "--rtol",

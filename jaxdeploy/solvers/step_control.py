@@ -22,7 +22,15 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from .._validation import check_nonnegative, check_positive, check_range, is_concrete
-from .registry import SOLVER_NAMES, solver_by_name
+from .registry import (
+    AUTO_TIGHT_RTOL,
+    AUTO_TIGHT_SOLVER,
+    SOLVER_NAMES,
+    auto_loose_solver,
+    is_solver_name,
+    resolve_solver,
+    solver_by_name,
+)
 
 DEFAULT_SOLVER = "generalized_alpha"
 DEFAULT_MAX_STEPS = 2_000_000
@@ -37,7 +45,9 @@ class StepControl:
 
     **Fields** (SI units; positions in m and rad, velocities in m/s and rad/s):
     - `solver`: a name from `jaxdeploy.solvers.SOLVER_NAMES` (`"generalized_alpha"`, the
-      default; `"tsit5"`, `"kvaerno5"`, … on the index-1 path) or a solver object.
+      default; `"tsit5"`, `"kvaerno5"`, … on the index-1 path), `"auto"` (Tsit5, or Dopri8
+      for an adaptive run at rtol < `AUTO_TIGHT_RTOL`; `"auto:NAME"`: NAME instead of Tsit5;
+      `jaxdeploy.solvers.resolve_solver`), or a solver object.
     - `rtol`, `atol`: tolerances of the adaptive step, rtol in (0, 1), atol > 0. With neither,
       the step is fixed: `dt`.
     - `dt` [s]: the fixed step, or the first step of an adaptive run (default
@@ -63,9 +73,11 @@ class StepControl:
     locate_events: bool = True
 
     def __post_init__(self):
-        if isinstance(self.solver, str) and self.solver not in SOLVER_NAMES:
+        if isinstance(self.solver, str) and not is_solver_name(self.solver):
+            auto_loose_solver(self.solver)  # an "auto:NAME" with a bad NAME says so
             raise ValueError(
-                f"solver = {self.solver!r} is invalid; valid: {', '.join(SOLVER_NAMES)}"
+                f"solver = {self.solver!r} is invalid; valid: {', '.join(SOLVER_NAMES)} "
+                "or auto:NAME"
             )
         if self.solver is None:
             object.__setattr__(self, "solver", DEFAULT_SOLVER)
@@ -160,12 +172,18 @@ class StepControl:
             return self.dt
         return DEFAULT_FIRST_STEP if self.dt_max is None else min(DEFAULT_FIRST_STEP, self.dt_max)
 
+    def resolved_solver(self):
+        """The solver this control runs: `solver`, with an automatic choice (`"auto"`,
+        `"auto:NAME"`) resolved by `rtol` (`jaxdeploy.solvers.resolve_solver`)."""
+        return resolve_solver(self.solver, self.rtol if self.adaptive else None, self.atol)
+
     def make_solver(self):
         """The solver object (a name is resolved by `solver_by_name`; implicit methods take
         their Newton tolerances from `rtol`/`atol`)."""
-        if isinstance(self.solver, str):
-            return solver_by_name(self.solver, rtol=self.rtol, atol=self.atol)
-        return self.solver
+        solver = self.resolved_solver()
+        if isinstance(solver, str):
+            return solver_by_name(solver, rtol=self.rtol, atol=self.atol)
+        return solver
 
     def controller(self, norm=None):
         """The diffrax step-size controller: `ConstantStepSize` for a fixed step, otherwise a
@@ -190,18 +208,33 @@ class StepControl:
         )
 
     def solver_name(self) -> str:
-        """The solver's name, or for a solver object a deterministic description of it."""
-        return self.solver if isinstance(self.solver, str) else repr(self.solver)
+        """The name of the solver that runs (an automatic choice resolved), or for a solver
+        object a deterministic description of it."""
+        solver = self.resolved_solver()
+        return solver if isinstance(solver, str) else repr(solver)
+
+    def solver_rule(self) -> str | None:
+        """For an automatic choice, the rule and the method it chose (as results record it);
+        None otherwise."""
+        loose = auto_loose_solver(self.solver)
+        if loose is None:
+            return None
+        return (
+            f"{self.solver}: {loose} for rtol ≥ {AUTO_TIGHT_RTOL:g} and fixed steps, "
+            f"{AUTO_TIGHT_SOLVER} below; chose {self.solver_name()}"
+        )
 
     def to_json(self) -> dict:
-        """Every field as JSON (numbers as floats, the solver by `solver_name`), as results
-        record it."""
+        """Every field as JSON (numbers as floats), as results record it: `solver` is the
+        solver that runs (`solver_name`), `solver_rule` the automatic choice that picked it
+        (None when the solver was given)."""
 
         def number(x):
             return None if x is None else float(x)
 
         return {
             "solver": self.solver_name(),
+            "solver_rule": self.solver_rule(),
             "rtol": number(self.rtol),
             "atol": number(self.atol),
             "dt": number(self.dt),
@@ -217,6 +250,9 @@ class StepControl:
         """The step control `to_json` recorded (a solver object recorded by its description
         cannot be rebuilt: `ValueError`)."""
         values = {k: record[k] for k in FIELDS if k in record}
+        rule = record.get("solver_rule")
+        if rule:  # the automatic choice, not the method it chose for these tolerances
+            values["solver"] = rule.partition(": ")[0]
         return cls(**values)
 
 
