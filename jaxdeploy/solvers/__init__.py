@@ -16,11 +16,12 @@ from .index1 import (
     state_norm,
 )
 from .non_finite import stop_at_non_finite
-from .registry import SOLVER_NAMES, solver_by_name
+from .registry import AUTO_TIGHT_RTOL, SOLVER_NAMES, resolve_solver, solver_by_name
 from .step_control import StepControl
 from .term import MechanismState, MechanismTerm
 
 __all__ = [
+    "AUTO_TIGHT_RTOL",
     "SOLVER_NAMES",
     "AlphaCoefficients",
     "GeneralizedAlpha",
@@ -33,6 +34,7 @@ __all__ = [
     "StepControl",
     "chung_hulbert",
     "project_onto_constraints",
+    "resolve_solver",
     "solver_by_name",
     "stabilised_accelerations",
     "state_norm",

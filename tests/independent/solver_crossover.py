@@ -6,7 +6,9 @@ docs/solver_by_tolerance.md, the measurement behind `jaxdeploy.solvers.AUTO_TIGH
 For μ = 0 and μ = 0.01 (tanh friction, v_s = 1 mm/s), Tsit5 and Dopri8 (and generalized-α down
 to rtol 1e-8) integrate two revolutions at rtol 1e-6 … 1e-12 (atol = 1e-3 rtol); per run: the
 accepted steps, the CPU time of the compiled run (`time.process_time`, every thread of the
-process; each solver and case is compiled by a first run that is not timed), the largest x_s
+process; each solver and case is compiled by a first run that is not timed), the right-hand
+side evaluations the Runge–Kutta runs make (attempted steps × new stages per step, from
+diffrax's tableaux: a count that the machine's load does not change), the largest x_s
 error over two revolutions on the reference's 10 µs grid, and the impacts found with their
 largest onset error.
 
@@ -24,6 +26,7 @@ import time
 import numpy as np
 
 from jaxdeploy.io import atomic_write_json, machine_description, replace_block, revision_label
+from jaxdeploy.solvers.registry import AUTO_TIGHT_RTOL
 
 from . import generate
 from .package_runs import TWO_REVOLUTIONS, slider_crank_run
@@ -86,6 +89,21 @@ def measure(reference):
     }
 
 
+def evaluations_per_step(solver):
+    """New right-hand-side evaluations per attempted step of a diffrax Runge–Kutta method:
+    its stages, less one when the last stage is the next step's first (FSAL)."""
+    import diffrax as dfx
+
+    tableau = {"tsit5": dfx.Tsit5, "dopri8": dfx.Dopri8}[solver].tableau
+    return len(tableau.c) + 1 - int(tableau.fsal)
+
+
+def evaluations(row):
+    if row["solver"] not in ("tsit5", "dopri8"):
+        return None
+    return (row["steps"] + row["rejected"]) * evaluations_per_step(row["solver"])
+
+
 def cheaper_at_equal_error(rows, case, key):
     """Per Tsit5 run: Dopri8's `key` (steps or CPU) at Tsit5's x_s error, interpolated
     log-log along Dopri8's runs (None outside their range), over Tsit5's."""
@@ -95,7 +113,7 @@ def cheaper_at_equal_error(rows, case, key):
         key=lambda r: r["x_s_error_m"],
     )
     errs = np.log([r["x_s_error_m"] for r in dop])
-    costs = np.log([r[key] for r in dop])
+    costs = np.log([cost(r, key) for r in dop])
     for r in rows:
         if r["case"] != case or r["solver"] != "tsit5":
             continue
@@ -103,8 +121,12 @@ def cheaper_at_equal_error(rows, case, key):
         if e < errs[0] or e > errs[-1] or not np.all(np.diff(errs) > 0):
             out[r["rtol"]] = None
         else:
-            out[r["rtol"]] = float(np.exp(np.interp(e, errs, costs)) / r[key])
+            out[r["rtol"]] = float(np.exp(np.interp(e, errs, costs)) / cost(r, key))
     return out
+
+
+def cost(row, key):
+    return evaluations(row) if key == "evaluations" else row[key]
 
 
 def block(result):
@@ -128,24 +150,29 @@ def block(result):
             f"**μ = {mu}** ({rows_of(rows, case)[0]['impacts_reference']} impacts in the "
             "reference)",
             "",
-            "| solver | rtol | accepted steps | CPU [s] | x_s error [m] | impacts | "
-            "largest onset error [s] |",
-            "|---|---|---|---|---|---|---|",
+            "| solver | rtol | accepted (rejected) steps | RHS evaluations | CPU [s] "
+            "| x_s error [m] | impacts | largest onset error [s] |",
+            "|---|---|---|---|---|---|---|---|",
         ]
         for r in rows_of(rows, case):
             onset = "—" if r["onset_error_s"] is None else f"{r['onset_error_s']:.1e}"
+            n_eval = evaluations(r)
             lines.append(
-                f"| {r['solver']} | {r['rtol']:g} | {r['steps']} | {r['cpu_s']:.2f} "
+                f"| {r['solver']} | {r['rtol']:g} | {r['steps']} ({r['rejected']}) "
+                f"| {'—' if n_eval is None else n_eval} | {r['cpu_s']:.2f} "
                 f"| {r['x_s_error_m']:.1e} | {r['impacts']}/{r['impacts_reference']} | {onset} |"
             )
-        steps = cheaper_at_equal_error(rows, case, "steps")
+        steps = cheaper_at_equal_error(rows, case, "evaluations")
         cpu = cheaper_at_equal_error(rows, case, "cpu_s")
         lines += [
             "",
-            "Dopri8's cost at Tsit5's error, over Tsit5's (interpolated log-log between "
-            "Dopri8's runs; < 1: Dopri8 is cheaper):",
+            "Dopri8's cost at Tsit5's x_s error, over Tsit5's (interpolated log-log between "
+            "Dopri8's runs; < 1: Dopri8 is cheaper; — where Tsit5's error is outside Dopri8's "
+            "range; RHS evaluations per attempted step: Tsit5 "
+            f"{evaluations_per_step('tsit5')}, Dopri8 {evaluations_per_step('dopri8')}; "
+            "generalized-α's cost is Newton iterations, not stages, and is not in the ratios):",
             "",
-            "| Tsit5 rtol | steps ratio | CPU ratio |",
+            "| Tsit5 rtol | RHS evaluations ratio | CPU ratio |",
             "|---|---|---|",
         ]
         for rtol in RTOLS:
@@ -154,6 +181,17 @@ def block(result):
                 f"| {rtol:g} | {'—' if s is None else f'{s:.2f}'} "
                 f"| {'—' if c is None else f'{c:.2f}'} |"
             )
+        fewer = [rtol for rtol in RTOLS if steps.get(rtol) is not None and steps[rtol] < 1.0]
+        lines += [
+            "",
+            f"μ = {mu}: Dopri8 needs fewer evaluations than Tsit5 at equal error from Tsit5's "
+            + (f"rtol {max(fewer):g} down." if fewer else "— (nowhere in this range)."),
+        ]
+    lines += [
+        "",
+        f'`jaxdeploy.solvers.AUTO_TIGHT_RTOL` = {AUTO_TIGHT_RTOL:g}: `solver="auto"` runs '
+        "Tsit5 at rtol ≥ it and Dopri8 below.",
+    ]
     return "\n".join(lines)
 
 
