@@ -25,6 +25,7 @@ from .elastic import (
 from .friction import (
     AbstractFrictionLaw,
     AmbrosioCoulomb,
+    LuGreContactFriction,
     LuGreFriction,
     SmoothCoulomb,
     StribeckFriction,
@@ -68,6 +69,7 @@ __all__ = [
     "AbstractFrictionLaw",
     "AmbrosioCoulomb",
     "LuGreFriction",
+    "LuGreContactFriction",
     "SmoothCoulomb",
     "StribeckFriction",
     "regularized_sign",

@@ -1,5 +1,5 @@
 """Tangential friction laws `F_T(v_t, F_N)` for the clearance joint, and the state-based
-LuGre law `F(v, z, F_N)` (its bristle deflection z a state of the mechanism).
+LuGre laws `F(v, z, F_N)` (their bristle deflection z a state of the mechanism).
 
 Every law returns the *signed* friction magnitude along +t: odd in the sliding speed `v_t`
 (m/s) and bounded by `μ_max F_N`. The caller applies it against sliding, i.e. the journal gets
@@ -11,7 +11,7 @@ the sign is regularised with an explicit slip velocity, never `tanh(100 v)`-styl
 from __future__ import annotations
 
 import abc
-from typing import Literal
+from typing import ClassVar, Literal
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -27,6 +27,7 @@ __all__ = [
     "AmbrosioCoulomb",
     "StribeckFriction",
     "LuGreFriction",
+    "LuGreContactFriction",
 ]
 
 
@@ -247,3 +248,93 @@ class LuGreFriction(eqx.Module):
         """The sliding force at constant `v`: `g(v) sgn(v) + σ2 v` [N]."""
         v = jnp.asarray(v, dtype=float)
         return self.steady_level(v, normal_force) * jnp.sign(v) + self.viscous * v
+
+
+class LuGreContactFriction(eqx.Module):
+    """The LuGre law for a contact whose normal force varies (a clearance joint's): the law of
+    Canudas de Wit, Olsson, Åström & Lischinsky (*IEEE Trans. Autom. Control* 40 (1995) 419,
+    the equations of `LuGreFriction`) with the bristle force written per unit normal force,
+
+        ż = v − σ0 |v| z / g(v),          g(v) = μ_C + (μ_S − μ_C) e^{−(v/v_S)²}
+        F = F_N (σ0 z + σ1 ż + σ2 v)      (signed along +v, N)
+
+    so σ0 [1/m], σ1 [s/m], σ2 [s/m] and the friction *coefficient* μ = σ0 z + σ1 ż + σ2 v is
+    what the bristles carry; this is the form multibody codes use for joint friction with a
+    varying normal load (e.g. Altair MotionSolve's LuGre joint friction:
+    μ = σ0 z + σ1 ż + σ2 v, force μ F_N). For a constant F_N it is `LuGreFriction` with
+    σ0 F_N, σ1 F_N, σ2 F_N and the levels μ F_N (tests/test_lugre.py checks this). Unlike that
+    form, z does not depend on F_N: a contact that opens (F_N = 0, no friction) keeps a finite
+    bristle state that relaxes along the sliding path over ~g/σ0, and a closing contact starts
+    from it, with no 1/F_N in the state equation.
+
+    At rest under a tangential load F < μ_S F_N the contact sticks (σ0 z = F/F_N, presliding
+    displacement ≤ μ_S/σ0); at constant sliding speed z → g(v) sgn(v)/σ0 and
+    F → F_N (g(v) sgn v + σ2 v). As σ0 → ∞ (σ1/σ0 fixed) the presliding displacement vanishes
+    and the law tends to Coulomb's F_N g(v) sgn v (with μ_S = μ_C, σ2 = 0: exactly
+    μ F_N sgn v).
+
+    **Arguments** (defaults: the example of Canudas de Wit et al. 1995, §IV, recalled —
+    F_C = 1 N, F_S = 1.5 N, σ0 = 1e5 N/m, σ1 = √1e5 N s/m, v_S = 1e-3 m/s — at the normal
+    force F_N = F_C/μ_C = 20 N that gives μ_C = 0.05, the scenes' hinge friction: the same
+    presliding displacement F_C/σ0 = 10 µm and bristle time constant σ1/σ0 = 3.2 ms; σ2 = 0,
+    so that the steady sliding level is the Coulomb + Stribeck one):
+
+    - `mu_coulomb` μ_C ≥ 0 (default 0.05), `mu_static` μ_S ≥ μ_C (default 0.075);
+    - `stribeck_velocity` v_S > 0 [m/s] (default 1e-3);
+    - `bristle_stiffness` σ0 > 0 [1/m] (default 5e3);
+    - `bristle_damping` σ1 ≥ 0 [s/m] (default 5e3/√1e5 ≈ 15.8);
+    - `viscous` σ2 ≥ 0 [s/m] (default 0).
+    """
+
+    mu_coulomb: Array = eqx.field(converter=_float_array, default=0.05)
+    mu_static: Array = eqx.field(converter=_float_array, default=0.075)
+    stribeck_velocity: Array = eqx.field(converter=_float_array, default=1e-3)
+    bristle_stiffness: Array = eqx.field(converter=_float_array, default=5e3)
+    bristle_damping: Array = eqx.field(converter=_float_array, default=15.811388300841896)
+    viscous: Array = eqx.field(converter=_float_array, default=0.0)
+    # A clearance joint keeps z as a continuous internal state (`RevoluteClearance`).
+    has_state: ClassVar[bool] = True
+
+    def __check_init__(self):
+        check_nonnegative("mu_coulomb", self.mu_coulomb)
+        check_nonnegative("mu_static", self.mu_static)
+        check_positive("stribeck_velocity", self.stribeck_velocity, unit="m/s")
+        check_positive("bristle_stiffness", self.bristle_stiffness, unit="1/m")
+        check_nonnegative("bristle_damping", self.bristle_damping, unit="s/m")
+        check_nonnegative("viscous", self.viscous, unit="s/m")
+        if is_concrete(self.mu_static) and is_concrete(self.mu_coulomb):
+            if float(self.mu_static) < float(self.mu_coulomb):
+                raise ValueError(
+                    f"mu_static = {float(self.mu_static)} is invalid: it must be ≥ mu_coulomb "
+                    f"= {float(self.mu_coulomb)}"
+                )
+            if float(self.mu_coulomb) <= 0.0:
+                raise ValueError(
+                    f"mu_coulomb = {float(self.mu_coulomb)} is invalid: the bristle law "
+                    "divides by the friction level; it must be > 0 (no friction: no law)"
+                )
+
+    def steady_level(self, v: ArrayLike) -> Array:
+        """`g(v)`, the sliding friction coefficient without its viscous part."""
+        v = jnp.asarray(v, dtype=float)
+        stribeck = jnp.exp(-((v / self.stribeck_velocity) ** 2))
+        return self.mu_coulomb + (self.mu_static - self.mu_coulomb) * stribeck
+
+    def rate(self, v: ArrayLike, z: ArrayLike) -> Array:
+        """`ż = v − σ0 |v| z / g(v)` [m/s] (independent of the normal force)."""
+        v = jnp.asarray(v, dtype=float)
+        return v - self.bristle_stiffness * jnp.abs(v) * z / self.steady_level(v)
+
+    def coefficient(self, v: ArrayLike, z: ArrayLike) -> Array:
+        """`μ = σ0 z + σ1 ż + σ2 v`, the friction force per unit normal force."""
+        zdot = self.rate(v, z)
+        return self.bristle_stiffness * z + self.bristle_damping * zdot + self.viscous * v
+
+    def force(self, v: ArrayLike, z: ArrayLike, normal_force: ArrayLike) -> Array:
+        """`F = F_N μ(v, z)` [N], signed along +v."""
+        return normal_force * self.coefficient(v, z)
+
+    def steady_force(self, v: ArrayLike, normal_force: ArrayLike) -> Array:
+        """The sliding force at constant `v`: `F_N (g(v) sgn(v) + σ2 v)` [N]."""
+        v = jnp.asarray(v, dtype=float)
+        return normal_force * (self.steady_level(v) * jnp.sign(v) + self.viscous * v)

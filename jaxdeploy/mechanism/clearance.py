@@ -36,7 +36,17 @@ lumping of the contact around the circumference (docs/contact.md); it does not r
 their derivative across e is of order χ (F_e(δ) + F_e(δ')) |ė| / (v⁻ |e|), zero for a journal
 at rest, and inside |e| ≲ ε (where n shrinks to 0) they are regularised on the scale ε.
 
-Memory (only for laws that need the impact velocity v⁻): `in_contact`, `impact_velocity`,
+**State-based friction.** With a friction law that has a state (`friction.has_state`, e.g.
+`contact.LuGreContactFriction`) the tangential force of each side is `F_T = F(v_t, z, F_N)`,
+its normal force the side's contact force, and the bristle deflections z = [z_near, z_far]
+[m] are the joint's continuous internal state, `memory["internal"]["bristle"]`, integrated
+with the equations of motion (`ż = law.rate(v_t, z)`; `AbstractElement.internal_rates`),
+starting at 0. Out of contact F_N = 0 and the side carries no friction, but its z goes on
+following the sliding of the (separated) surfaces, so a contact closes with the bristles the
+law's sliding state gives them.
+
+Memory (for laws that need the impact velocity v⁻; a state-based friction law adds its
+`internal` states): `in_contact`, `impact_velocity`,
 `eccentricity` and `eccentricity_rate` (e, ė at the last step's end), `penetration`,
 `penetration_rate` and `event_fraction`, updated after each accepted step. What v⁻ is, is the
 joint's `impact_velocity_rule`:
@@ -137,6 +147,11 @@ class ClearanceGeometry:
         self.far_contact_point_bearing, self.far_contact_point_journal = qi_far, qj_far
 
 
+def _sliding(g: ClearanceGeometry):
+    """The sliding speeds [near, far] along each side's tangent [m/s]."""
+    return jnp.stack([g.sliding_velocity, g.far_sliding_velocity])
+
+
 class RevoluteClearance(AbstractElement):
     """Journal-in-bearing clearance joint.
 
@@ -147,7 +162,9 @@ class RevoluteClearance(AbstractElement):
       computes it from both radii and refuses a journal larger than its bearing).
     - `journal_radius`: pin radius R_j [m] > 0.
     - `normal`: a normal contact law from `jaxdeploy.contact` (e.g. `LankaraniNikravesh`).
-    - `friction`: a friction law from `jaxdeploy.contact`, or `None` (frictionless).
+    - `friction`: a friction law from `jaxdeploy.contact`, or `None` (frictionless); a law
+      with a state (`has_state`, `contact.LuGreContactFriction`) keeps its bristle
+      deflections as the joint's internal state (module docstring).
     - `eccentricity_smoothing`: ε [m] in |e| = sqrt(e·e + ε²).
     - `impact_velocity_rule`: `"onset"` (classical, default) or `"running_max"` — what the
       damping law's impact velocity v⁻ is (module docstring).
@@ -177,8 +194,18 @@ class RevoluteClearance(AbstractElement):
         check_positive("eccentricity_smoothing", self.eccentricity_smoothing, "m")
 
     @property
-    def has_memory(self) -> bool:
+    def _impact_memory(self) -> bool:
+        """Whether the normal law needs the v⁻ memory."""
         return bool(getattr(self.normal, "needs_impact_velocity", False))
+
+    @property
+    def has_internal_state(self) -> bool:
+        """Whether the friction law has a state (the bristle deflections, one per side)."""
+        return bool(getattr(self.friction, "has_state", False))
+
+    @property
+    def has_memory(self) -> bool:
+        return self._impact_memory or self.has_internal_state
 
     def bodies(self):
         return (self.bearing_body, self.journal_body)
@@ -192,8 +219,13 @@ class RevoluteClearance(AbstractElement):
     def init_memory(self, kin: Kinematics):
         if not self.has_memory:
             return None
+        out = {}
+        if self.has_internal_state:
+            out["internal"] = {"bristle": jnp.zeros((2,), dtype=kin.q.dtype)}
+        if not self._impact_memory:
+            return out
         g = self.geometry(kin)
-        return {
+        return out | {
             "in_contact": jnp.where(g.penetration > self._onset(), 1.0, 0.0),
             "impact_velocity": jnp.maximum(g.penetration_rate, 0.0),
             "penetration": g.penetration,
@@ -208,8 +240,8 @@ class RevoluteClearance(AbstractElement):
         docstring). `eccentricity` and `eccentricity_rate` record e and ė at the step's end, the
         start values of the next step's interpolant; `penetration` and `penetration_rate` the δ
         and δ̇ there (outputs)."""
-        if not self.has_memory:
-            return memory
+        if not self._impact_memory:
+            return memory  # the internal states (if any) are passed on
         g = self.geometry(kin)
         onset = self._onset()
         # e = r_Pj − r_Pi is a difference of world positions: its round-off is a few ulps of
@@ -260,7 +292,8 @@ class RevoluteClearance(AbstractElement):
 
         # The interpolant's root and peak searches (µs per step) only where they matter.
         v_minus, event = jax.lax.cond(now_in, in_contact_at_end, out_of_contact_at_end)
-        return {
+        internal = {"internal": memory["internal"]} if self.has_internal_state else {}
+        return internal | {
             "in_contact": jnp.where(now_in, 1.0, 0.0),
             "impact_velocity": jnp.maximum(v_minus, 0.0),
             "penetration": g.penetration,
@@ -274,7 +307,7 @@ class RevoluteClearance(AbstractElement):
         """Where in the last accepted step v⁻ was set or reset — the contact's onset, an
         interior peak of δ̇ that raised it, or the separation — as a fraction of the step
         (≥ 1: none happened); `None` for laws without v⁻ memory."""
-        return memory["event_fraction"] if self.has_memory else None
+        return memory["event_fraction"] if self._impact_memory else None
 
     def side_forces(self, kin: Kinematics, memory):
         """`(F_N, F_T, geometry)` at state `kin`, each force an array `[near, far]` (both
@@ -282,14 +315,20 @@ class RevoluteClearance(AbstractElement):
         g = self.geometry(kin)
         delta = jnp.stack([g.penetration, g.far_penetration])
         rate = jnp.stack([g.penetration_rate, g.far_penetration_rate])
-        v_minus = None if memory is None else self._impact_velocity(memory, rate)
+        v_minus = self._impact_velocity(memory, rate) if self._impact_memory else None
         fn = self.normal.force(delta, rate, v_minus)
         if self.friction is None:
             ft = jnp.zeros_like(fn)
+        elif self.has_internal_state:
+            ft = self.friction.force(_sliding(g), memory["internal"]["bristle"], fn)
         else:
-            sliding = jnp.stack([g.sliding_velocity, g.far_sliding_velocity])
-            ft = self.friction.force(sliding, fn)
+            ft = self.friction.force(_sliding(g), fn)
         return fn, ft, g
+
+    def internal_rates(self, kin: Kinematics, t, memory):
+        """`ż` of the bristle deflections [near, far] (state-based friction only)."""
+        z = memory["internal"]["bristle"]
+        return {"bristle": self.friction.rate(_sliding(self.geometry(kin)), z)}
 
     def _impact_velocity(self, memory, rate):
         """v⁻ seen by the damping law at a state with penetration rates `rate` [near, far]."""

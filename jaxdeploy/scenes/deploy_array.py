@@ -78,6 +78,18 @@ LATCH_PRELOAD_PARAMS = (
 FRICTION_ROUGHNESS_MODELS = ("constant", "ploughing")
 PLOUGHING_PARAMS = ("friction_adhesion", "tool_nose_radius")
 
+# The hinges' tangential friction law (docs/contact.md, "Friction that sticks"): "coulomb", the
+# regularised Coulomb law of the literature's clearance-joint models (a loaded hinge creeps at
+# ~v_s), or "lugre", `contact.LuGreContactFriction` with the contact force as its normal force
+# and its bristle deflections in each clearance joint's internal state (a loaded hinge sticks).
+FRICTION_LAWS = ("coulomb", "lugre")
+LUGRE_PARAMS = (
+    "friction_static_ratio",
+    "stribeck_velocity",
+    "bristle_stiffness",
+    "bristle_damping",
+)
+
 INF = math.inf
 
 
@@ -168,6 +180,18 @@ def _shared_params() -> dict[str, ParamSpec]:
         ),
         "impact_velocity_floor": IMPACT_VELOCITY_FLOOR_SPEC,
         "friction_slip_velocity": SLIP_VELOCITY_SPEC,
+        # friction_law="lugre" only (`contact.LuGreContactFriction`; defaults: the example of
+        # Canudas de Wit et al. 1995 at μ_C = 0.05 — presliding μ_C/σ0 = 10 µm, σ1/σ0 = 3.2 ms).
+        "friction_static_ratio": ParamSpec(
+            1.5, 1, 10, "", "LuGre static to Coulomb friction ratio μ_S/μ_C"
+        ),
+        "stribeck_velocity": ParamSpec(1e-3, 0, 10, "m/s", "LuGre Stribeck velocity v_S", False),
+        "bristle_stiffness": ParamSpec(
+            5e3, 0, 1e9, "1/m", "LuGre bristle stiffness σ0 per unit normal force", False
+        ),
+        "bristle_damping": ParamSpec(
+            15.811388300841896, 0, 1e6, "s/m", "LuGre bristle damping σ1 per unit normal force"
+        ),
     }
 
 
@@ -188,6 +212,11 @@ class DeployArray(Scene):
     - `friction_roughness`: `"constant"` (default: `friction_coefficient` at every Ra) or
       `"ploughing"` (each hinge's μ from its Ra, `contact.PloughingFriction` with
       `friction_adhesion` and `tool_nose_radius`).
+    - `friction_law`: `"coulomb"` (default: the regularised Coulomb law, `friction_shape` and
+      `friction_slip_velocity`) or `"lugre"` (`contact.LuGreContactFriction`: μ_C the hinge's
+      μ, μ_S = `friction_static_ratio` μ_C, `stribeck_velocity`, `bristle_stiffness`,
+      `bristle_damping`; the bristle deflections are each clearance joint's internal state,
+      so generalized-α cannot run it).
     """
 
     name = "deploy_array"
@@ -215,6 +244,12 @@ class DeployArray(Scene):
             "hinge friction vs roughness: constant (friction_coefficient) or ploughing "
             "(adhesion + ploughing of a turned surface, from each hinge's Ra)",
         ),
+        "friction_law": OptionSpec(
+            "coulomb",
+            FRICTION_LAWS,
+            "hinge friction law: coulomb (regularised, creeps under a steady load) or lugre "
+            "(bristle state per clearance joint, sticks below the static level)",
+        ),
         "latch": OptionSpec(
             DEFAULT_LATCH,
             LATCH_MODELS,
@@ -232,12 +267,17 @@ class DeployArray(Scene):
         friction_shape: str = "algebraic",
         latch: str = DEFAULT_LATCH,
         friction_roughness: str = "constant",
+        friction_law: str = "coulomb",
     ):
         check_contact_options(normal_law, impact_velocity_rule, friction_shape)
         if friction_roughness not in FRICTION_ROUGHNESS_MODELS:
             raise ValueError(
                 f"friction_roughness = {friction_roughness!r} is invalid; valid: "
                 f"{', '.join(FRICTION_ROUGHNESS_MODELS)}"
+            )
+        if friction_law not in FRICTION_LAWS:
+            raise ValueError(
+                f"friction_law = {friction_law!r} is invalid; valid: {', '.join(FRICTION_LAWS)}"
             )
         if latch not in LATCH_MODELS:
             raise ValueError(f"latch = {latch!r} is invalid; valid: {', '.join(LATCH_MODELS)}")
@@ -254,6 +294,7 @@ class DeployArray(Scene):
         self.friction_shape = friction_shape
         self.latch = latch
         self.friction_roughness = friction_roughness
+        self.friction_law = friction_law
         params = _shared_params()
         ra = GEOMETRY["contact_defaults"]["Ra"]
         c = GEOMETRY["contact_defaults"]["clearance"]
@@ -274,6 +315,7 @@ class DeployArray(Scene):
             "friction_shape": self.friction_shape,
             "latch": self.latch,
             "friction_roughness": self.friction_roughness,
+            "friction_law": self.friction_law,
         }
 
     def ignored_params(self) -> dict[str, str]:
@@ -284,6 +326,10 @@ class DeployArray(Scene):
             out["friction_coefficient"] = "friction_roughness=constant"
         else:
             out.update(dict.fromkeys(PLOUGHING_PARAMS, "friction_roughness=ploughing"))
+        if self.friction_law == "lugre":
+            out["friction_slip_velocity"] = "friction_law=coulomb"
+        else:
+            out.update(dict.fromkeys(LUGRE_PARAMS, "friction_law=lugre"))
         if self.ideal:
             used_by_contact = (*CONTACT_PARAMS, "pin_radius", "roughness_offset")
             out.update({n: "ideal=false" for n in self.params if n in used_by_contact})
@@ -329,6 +375,14 @@ class DeployArray(Scene):
                 friction_shape=self.friction_shape,
                 impact_velocity_floor=p["impact_velocity_floor"],
             )
+            if friction is not None and self.friction_law == "lugre":
+                friction = contact.LuGreContactFriction(
+                    mu_coulomb=friction_coefficient,
+                    mu_static=p["friction_static_ratio"] * friction_coefficient,
+                    stribeck_velocity=p["stribeck_velocity"],
+                    bristle_stiffness=p["bristle_stiffness"],
+                    bristle_damping=p["bristle_damping"],
+                )
             elements.append(
                 RevoluteClearance(
                     *ends,
