@@ -12,8 +12,11 @@ inside [t0, t1]) are host callbacks unless `EQX_ON_ERROR` is `nan` or `off`. The
 therefore sets `EQX_ON_ERROR=nan` (unless the user set it) before equinox is imported, and
 `simulate` checks those same conditions in Python before tracing, so they cannot fire.
 
+The persistent cache skips only XLA's backend compile; `_program_cache` keeps the traced
+and lowered programs beside it (folder + `-programs`), so that a warm run skips tracing too.
+
 Location: `$JAXDEPLOY_CACHE_DIR`, else `$XDG_CACHE_HOME/jaxdeploy/xla`, else
-`~/.cache/jaxdeploy/xla`. Set `JAXDEPLOY_CACHE_DIR=off` to disable.
+`~/.cache/jaxdeploy/xla`. Set `JAXDEPLOY_CACHE_DIR=off` to disable both.
 """
 
 from __future__ import annotations
@@ -38,13 +41,18 @@ def prefer_cacheable_errors() -> None:
 
 
 def enable_compilation_cache() -> str | None:
-    """Point JAX's persistent compilation cache at `cache_dir()`; returns the folder used.
+    """Point JAX's persistent compilation cache at `cache_dir()` and the program cache beside
+    it; returns the compilation cache's folder.
 
     Leaves a cache directory the user configured for JAX itself untouched. A cache that
     cannot be created (read-only home) is skipped: compiling again is slower, not wrong.
     """
     import jax
 
+    from . import _program_cache
+
+    chosen = cache_dir()
+    _program_cache.enable(None if chosen is None else chosen.rstrip(os.sep) + "-programs")
     if jax.config.jax_compilation_cache_dir:
         return jax.config.jax_compilation_cache_dir
     folder = cache_dir()

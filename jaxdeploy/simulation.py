@@ -8,6 +8,7 @@ status that says when and why a run failed (never silent NaN).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import replace
 from typing import NamedTuple
 
@@ -17,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _program_cache
 from ._validation import is_concrete
 from .mechanism import ConsistentState, Mechanism
 from .solvers import (
@@ -338,7 +340,11 @@ def simulate(
         locate_events=locate_events,
         extreme_samples=extreme_samples,
     )
-    sol = _solve(
+    # Through the program cache when the command line enabled it (a plain call otherwise): a
+    # second process with the same composition and shapes skips tracing and lowering. A
+    # progress bar is a host callback, which JAX cannot export.
+    solve = _solve if progress else functools.partial(_program_cache.call, _solve)
+    sol = solve(
         mechanism,
         run.y0,
         run.t0,

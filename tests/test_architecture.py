@@ -16,6 +16,7 @@ FLOORS = {
     "_version": 0,
     "io": 0,
     "_compilation_cache": 0,
+    "_program_cache": 0,
     "contact": 1,
     "mechanism": 2,
     "solvers": 3,

@@ -88,7 +88,9 @@ def test_set_requires_name_equals_value(tmp_path, capsys):
 
 def test_compiled_simulation_is_kept_in_the_persistent_cache(tmp_path):
     """A fresh `jaxdeploy simulate` stores the compiled solve (no host callbacks in it), so
-    the next run with the same composition loads it instead of compiling."""
+    the next run with the same composition loads it instead of compiling, and the traced
+    programs beside it (jaxdeploy/_program_cache.py), so that it does not trace them either:
+    the solve runs as a program read back through `jax.export` (`call_exported`)."""
     import os
     import subprocess
     import sys
@@ -104,7 +106,9 @@ def test_compiled_simulation_is_kept_in_the_persistent_cache(tmp_path):
         [*cmd, "--out", str(tmp_path / "run"), "--quiet"], env=env, capture_output=True, text=True
     )
     assert proc.returncode == 0, proc.stderr
-    assert any(p.name.startswith("jit__solve-") for p in cache.iterdir())
+    assert any(p.name.startswith("jit_call_exported-") for p in cache.iterdir())
+    # the initial state's assembly and the solve
+    assert len(list((tmp_path / "xla-programs").glob("*.jaxexport"))) >= 2
 
 
 def test_save_times_are_checked_before_the_solve():

@@ -19,17 +19,16 @@ skipped (computing the reference again is slower, not wrong).
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import os
-import pathlib
 import platform
 from typing import NamedTuple
 
 import numpy as np
 
 from .._compilation_cache import cache_dir
+from .._program_cache import code_digest
 
 
 class StoredRun(NamedTuple):
@@ -56,17 +55,6 @@ def folder() -> str | None:
     return None if base is None else base.rstrip(os.sep) + "-references"
 
 
-@functools.cache
-def _code_digest() -> str:
-    package = pathlib.Path(__file__).resolve().parents[1]
-    digest = hashlib.sha256()
-    for path in sorted(package.rglob("*")):
-        if path.suffix in (".py", ".json") and "__pycache__" not in path.parts:
-            digest.update(str(path.relative_to(package)).encode())
-            digest.update(path.read_bytes())
-    return digest.hexdigest()
-
-
 def key(scene, params, ts, control) -> str:
     """The cache key of `scene`'s reference run (see the module docstring)."""
     import diffrax
@@ -80,7 +68,7 @@ def key(scene, params, ts, control) -> str:
         k: float(v) for k, v in sorted(params.items()) if k in ideal.params and k not in unused
     }
     record = {
-        "code": _code_digest(),
+        "code": code_digest(),
         "versions": [
             jax.__version__,
             jaxlib.__version__,

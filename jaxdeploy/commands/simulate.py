@@ -38,6 +38,11 @@ INTEGRATE_S_PER_SIMULATED_S = {
 }
 # A run estimated to integrate longer than this needs --long-run [s].
 LONG_RUN_S = 900.0
+# A run estimated to integrate longer than this shows diffrax's progress bar on a terminal
+# [s]. Shorter runs go without: the bar is a host callback, which keeps the program out of
+# the program cache (jaxdeploy/_program_cache.py), and tracing would cost more than the bar
+# tells.
+PROGRESS_BAR_S = 30.0
 
 
 def add_arguments(parser) -> None:
@@ -210,7 +215,9 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
             t_end,
             n_save=args.n_save,
             # diffrax's bar shows the simulated time as a percentage of t_end.
-            progress=not args.quiet and sys.stderr.isatty(),
+            progress=not args.quiet
+            and sys.stderr.isatty()
+            and INTEGRATE_S_PER_SIMULATED_S.get(scene.name, math.inf) * t_end > PROGRESS_BAR_S,
             control=control,
         )
         trajectory.q.block_until_ready()

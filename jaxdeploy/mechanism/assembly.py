@@ -20,6 +20,7 @@ import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _program_cache
 from .._validation import is_concrete
 from .saddle_point import least_change_correction
 from .system import Mechanism
@@ -199,8 +200,9 @@ def consistent_state(
             f"{mechanism.n_coordinates} coordinates (3 per body)"
         )
     v_guess = jnp.zeros_like(q_guess) if v_guess is None else jnp.asarray(v_guess, dtype=float)
-    state, (res, it, sv_max, sv_min) = _consistent_core(
-        mechanism, q_guess, v_guess, t, tuple(fixed), tuple(fixed_velocities), tol
+    # Through the command line's program cache (a plain call unless it is enabled).
+    state, (res, it, sv_max, sv_min) = _program_cache.call(
+        _consistent_core, mechanism, q_guess, v_guess, t, tuple(fixed), tuple(fixed_velocities), tol
     )
     if is_concrete((state.q, res)):
         if not np.isfinite(float(res)) or float(res) > 1e3 * tol:

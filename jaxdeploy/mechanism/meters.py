@@ -50,6 +50,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _program_cache
 from .assembly import ConsistentState
 from .bodies import CLOCK, Body, Kinematics
 from .clearance import RevoluteClearance
@@ -276,7 +277,7 @@ def contact_history(mechanism: Mechanism, q, v, memory) -> dict[int, dict]:
     of the bore's near and far side (`RevoluteClearance.contact_forces`; the far side is zero
     unless the clearance is below ~3σ)."""
     return {
-        index: _joint_history(mechanism, index, q, v, memory)
+        index: _program_cache.call(_joint_history, mechanism, index, q, v, memory)
         for index in mechanism.find(RevoluteClearance)
     }
 

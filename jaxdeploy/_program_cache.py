@@ -1,0 +1,290 @@
+"""Traced programs kept on disk between processes, so that a second `jaxdeploy simulate` does
+not trace and lower its programs again.
+
+JAX's persistent compilation cache (`_compilation_cache`) skips only XLA's backend compile:
+every process still traces the Python code into a jaxpr and lowers it to StableHLO, which for
+deploy_array's integration is most of a warm run. `jax.export` serializes a lowered program
+with the shapes and dtypes of its arguments, and `jax.export.deserialize(...).call(...)` runs
+it in another process without the Python code that made it
+(https://docs.jax.dev/en/latest/export/export.html; its compiled form then comes from the
+persistent compilation cache as before).
+
+`call(fn, *args)` is `fn(*args)` for an `equinox.filter_jit` function `fn`, through that
+store. An exported program is the trace of `fn` for one composition of its arguments: its
+array leaves are inputs (their values may change), everything else was baked in while
+tracing. The entry's key is therefore everything the trace depends on: the package's code
+(`code_digest`: every .py and .json file under jaxdeploy/), the versions of jax, jaxlib,
+diffrax, equinox, lineax, optimistix and numpy, the platform and devices, the JAX settings
+that change a trace, `EQX_ON_ERROR`, `fn`'s name, the tree structure of the arguments (with
+their static fields), the shape, dtype and weak type of each array leaf, and the value of
+every other leaf. A leaf whose value cannot be written down exactly (an object or a function
+that closes over data) makes the call uncacheable, and it runs as `fn(*args)`; so does a call
+under a transformation (traced arguments), one in a process where equinox's runtime checks
+are host callbacks (`EQX_ON_ERROR=raise`, its default: the command line sets `nan`, see
+`_compilation_cache`) and one whose program JAX cannot export (another host callback, e.g. a
+progress bar; it warns once).
+
+Every call through the store runs the exported program, the first (which writes the entry)
+as well as the later ones (which read it), so a result does not depend on whether the entry
+existed; the program is the one `jax.jit(fn)` lowers, and tests/test_program_cache.py checks
+that the results are bit-identical to `fn(*args)`.
+
+Location: off unless a caller enables it (`enable`; the command line does, beside the
+compilation cache: `_compilation_cache.cache_dir()` + `-programs`, so `JAXDEPLOY_CACHE_DIR`
+moves it and `JAXDEPLOY_CACHE_DIR=off` turns it off). An entry that cannot be read is ignored
+with a warning and written again; a store that cannot be written is skipped (tracing again is
+slower, not wrong). Entries hold pickled tree structures: like the compilation cache, the
+folder must be writable by its user only.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import inspect
+import json
+import os
+import pathlib
+import pickle
+import platform
+import sys
+import tempfile
+import warnings
+
+_folder: str | None = None
+_unexportable: set[str] = set()
+
+# JAX settings that change what a function traces to (dtypes, precision, promotion rules).
+_TRACE_SETTINGS = (
+    "jax_enable_x64",
+    "jax_default_matmul_precision",
+    "jax_numpy_dtype_promotion",
+    "jax_numpy_rank_promotion",
+    "jax_default_prng_impl",
+    "jax_debug_nans",
+    "jax_debug_infs",
+)
+# Modules whose functions may be leaves of a cached call's arguments: their code is in the
+# key (the package's digest, the libraries' versions), so a module-level function of theirs
+# is identified by its qualified name.
+_KEYED_MODULES = ("jaxdeploy", "jax", "diffrax", "equinox", "lineax", "optimistix", "numpy")
+
+
+def enable(folder: str | None) -> None:
+    """Store programs in `folder` from now on (None: off)."""
+    global _folder
+    _folder = folder
+
+
+def folder() -> str | None:
+    return _folder
+
+
+@functools.cache
+def code_digest() -> str:
+    """SHA-256 of every .py and .json file under jaxdeploy/ (names and contents)."""
+    package = pathlib.Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for path in sorted(package.rglob("*")):
+        if path.suffix in (".py", ".json") and "__pycache__" not in path.parts:
+            digest.update(str(path.relative_to(package)).encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+@functools.cache
+def _environment() -> str:
+    import diffrax
+    import equinox
+    import jax
+    import jaxlib
+    import lineax
+    import numpy as np
+    import optimistix
+
+    versions = [m.__version__ for m in (jax, jaxlib, diffrax, equinox, lineax, optimistix, np)]
+    return json.dumps(
+        {
+            "code": code_digest(),
+            "versions": versions,
+            "platform": [platform.platform(), platform.machine()],
+            "devices": [str(d) for d in jax.devices()],
+        }
+    )
+
+
+def _leaf_key(leaf):
+    """An exact description of a non-array leaf, or None when it has none."""
+    if leaf is None or type(leaf) in (bool, int, float, complex, str):
+        return [type(leaf).__name__, repr(leaf)]  # repr of a float is exact (round-trips)
+    if inspect.isfunction(leaf):
+        module = leaf.__module__ or ""
+        # A closure or a nested function carries data the name does not say.
+        if (
+            leaf.__closure__ is None
+            and "<" not in leaf.__qualname__
+            and module.split(".")[0] in _KEYED_MODULES
+        ):
+            return ["function", f"{module}:{leaf.__qualname__}"]
+    return None
+
+
+def _equinox_on_error() -> str:
+    """What equinox's runtime checks do in this process: `EQX_ON_ERROR` as equinox read it
+    when it was imported (a later change of the variable has no effect on it)."""
+    import equinox  # noqa: F401
+
+    config = sys.modules.get("equinox._config")
+    return getattr(config, "EQX_ON_ERROR", None) or os.environ.get("EQX_ON_ERROR", "raise")
+
+
+def key(fn, args) -> str | None:
+    """The store's key of `fn(*args)` (see the module docstring), or None if uncacheable."""
+    import equinox as eqx
+    import jax
+
+    on_error = _equinox_on_error()
+    if on_error not in ("nan", "off") or jax.config.jax_disable_jit:
+        return None  # equinox's checks are host callbacks; without jit there is no program
+    leaves, treedef = jax.tree.flatten(args)
+    structure = str(treedef)
+    if " at 0x" in structure:  # a static field identified by its address
+        return None
+    described = []
+    for leaf in leaves:
+        if isinstance(leaf, jax.core.Tracer):
+            return None  # under jit/vmap/grad: the caller's trace owns this call
+        if eqx.is_array(leaf):
+            aval = jax.typeof(leaf)
+            described.append(["array", list(aval.shape), str(aval.dtype), aval.weak_type])
+            continue
+        description = _leaf_key(leaf)
+        if description is None:
+            return None
+        described.append(description)
+    settings = {name: str(getattr(jax.config, name, None)) for name in _TRACE_SETTINGS}
+    record = [
+        _environment(),
+        settings,
+        on_error,
+        f"{fn.__module__}:{getattr(fn, '__qualname__', repr(fn))}",
+        structure,
+        described,
+    ]
+    return hashlib.sha256(json.dumps(record).encode()).hexdigest()
+
+
+def call(fn, *args):
+    """`fn(*args)` (`fn` an `equinox.filter_jit` function), through the store when it is on
+    and the call is cacheable (module docstring)."""
+    import equinox as eqx
+    import jax
+
+    where = _folder
+    cache_key = None if where is None else key(fn, args)
+    if cache_key is None:
+        return fn(*args)
+    path = os.path.join(where, f"{cache_key}.jaxexport")
+    entry = _load(path)
+    if entry is None:
+        payload = None if cache_key in _unexportable else _export(fn, args)
+        if payload is None:
+            _unexportable.add(cache_key)  # not tried again in this process
+            return fn(*args)
+        _store(path, payload)
+        # Run what was stored, read back: deserializing drops weak types, so the program
+        # that wrote the entry would give outputs that differ from a later hit's in them
+        # (and so miss the keys of the programs they flow into).
+        entry = _decode(payload)
+    exported, skeleton = entry
+    arrays = [x for x in jax.tree.leaves(args) if eqx.is_array(x)]
+    results = iter(exported.call(*arrays))
+    return jax.tree.map(lambda leaf: next(results) if leaf is _ARRAY else leaf, skeleton)
+
+
+class _ArrayMark:
+    """Where an output leaf is an array (the exported program's next result)."""
+
+    def __reduce__(self):
+        return "_ARRAY"  # unpickles as this module's one instance
+
+
+_ARRAY = _ArrayMark()
+
+
+def _export(fn, args) -> bytes | None:
+    """The store's entry for `fn(*args)`: its exported program and its output with the arrays
+    marked, serialized; None when JAX cannot export or serialize it (then the caller runs
+    `fn` as it is, which raises again if the error was the traced code's own)."""
+    import equinox as eqx
+    import jax
+
+    leaves, treedef = jax.tree.flatten(args)
+    shapes = [
+        jax.ShapeDtypeStruct(x.shape, x.dtype, weak_type=jax.typeof(x).weak_type)
+        for x in leaves
+        if eqx.is_array(x)
+    ]
+    output = {}
+
+    def flat(*arrays):
+        given = iter(arrays)
+        full = [next(given) if eqx.is_array(x) else x for x in leaves]
+        out_leaves, out_treedef = jax.tree.flatten(fn(*jax.tree.unflatten(treedef, full)))
+        # The output with each array replaced by a mark, stored by pickling the objects
+        # themselves (a pickled tree structure loses equinox's sentinels).
+        marked = [_ARRAY if eqx.is_array(x) else x for x in out_leaves]
+        output["skeleton"] = jax.tree.unflatten(out_treedef, marked)
+        return [x for x in out_leaves if eqx.is_array(x)]
+
+    try:
+        exported = jax.export.export(jax.jit(flat))(*shapes)
+        return pickle.dumps({"program": bytes(exported.serialize()), **output})
+    except Exception as err:  # noqa: BLE001
+        # e.g. a host callback (a progress bar, equinox's checks under EQX_ON_ERROR=raise).
+        warnings.warn(
+            f"{getattr(fn, '__qualname__', fn)} is not kept in the program cache: JAX could "
+            f"not export it ({type(err).__name__}: {str(err)[:200]})",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return None
+
+
+def _decode(payload: bytes):
+    import jax
+
+    stored = pickle.loads(payload)
+    return jax.export.deserialize(bytearray(stored["program"])), stored["skeleton"]
+
+
+def _load(path):
+    """The entry at `path` decoded, or None when there is none or it cannot be read."""
+    try:
+        with open(path, "rb") as f:
+            payload = f.read()
+    except OSError:
+        return None
+    try:
+        return _decode(payload)
+    except Exception as err:  # noqa: BLE001 - any unreadable entry is traced again
+        warnings.warn(
+            f"ignoring the unreadable program cache entry {path} ({type(err).__name__}: "
+            f"{err}); tracing the program again",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return None
+
+
+def _store(path: str, payload: bytes) -> None:
+    where = os.path.dirname(path)
+    try:
+        os.makedirs(where, exist_ok=True)
+        # Written whole, then renamed: a reader never sees half an entry.
+        fd, tmp = tempfile.mkstemp(dir=where, suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            f.write(payload)
+        os.replace(tmp, path)
+    except OSError:
+        pass

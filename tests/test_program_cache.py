@@ -1,0 +1,176 @@
+"""The program cache (jaxdeploy/_program_cache.py): an exported program is reused only for the
+same code, composition and shapes, its results are bit-identical to the function's own, and a
+corrupt entry is ignored with a warning."""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxdeploy import _program_cache
+
+
+@eqx.filter_jit
+def _toy(x, scale, power):
+    """A program whose trace bakes in `scale` and `power` (static) and takes `x` as data."""
+    return {"y": scale * x**power, "n": power}
+
+
+@pytest.fixture
+def store(tmp_path, monkeypatch):
+    """The store on, in a fresh folder, as in a process whose equinox checks are not host
+    callbacks (the toy program has none either way)."""
+    monkeypatch.setattr(_program_cache, "_equinox_on_error", lambda: "nan")
+    monkeypatch.setattr(_program_cache, "_unexportable", set())
+    _program_cache.enable(str(tmp_path / "programs"))
+    yield tmp_path / "programs"
+    _program_cache.enable(None)
+
+
+def _entries(folder):
+    return sorted(p.name for p in folder.glob("*.jaxexport"))
+
+
+def test_a_hit_reads_the_stored_program_and_gives_the_functions_result(store):
+    x = jnp.linspace(0.1, 2.0, 7)
+    first = _program_cache.call(_toy, x, 1.5, 3)
+    assert len(_entries(store)) == 1
+    again = _program_cache.call(_toy, x + 1.0, 1.5, 3)  # new values, same program
+    assert len(_entries(store)) == 1
+    direct = _toy(x + 1.0, 1.5, 3)
+    assert first["n"] == again["n"] == 3  # a static output comes back as it was
+    np.testing.assert_array_equal(np.asarray(again["y"]), np.asarray(direct["y"]))
+    np.testing.assert_array_equal(np.asarray(first["y"]), np.asarray(_toy(x, 1.5, 3)["y"]))
+
+
+def test_code_options_and_shapes_each_miss(store, monkeypatch):
+    x = jnp.linspace(0.1, 2.0, 7)
+    base = _program_cache.key(_toy, (x, 1.5, 3))
+    assert base == _program_cache.key(_toy, (x * 2.0, 1.5, 3))  # values are data
+    assert base != _program_cache.key(_toy, (jnp.ones(8), 1.5, 3))  # shape
+    assert base != _program_cache.key(_toy, (x.astype(jnp.float32), 1.5, 3))  # dtype
+    assert base != _program_cache.key(_toy, (x, 1.5 + 1e-15, 3))  # a static float, exactly
+    assert base != _program_cache.key(_toy, (x, 1.5, 3.0))  # its type
+    assert base != _program_cache.key(_toy, (x, 1.5, 2))  # a composition choice
+    monkeypatch.setattr(_program_cache, "_environment", lambda: "other code")
+    assert base != _program_cache.key(_toy, (x, 1.5, 3))  # the package's code
+    # Through `call`: every changed composition writes its own entry.
+    monkeypatch.undo()
+    monkeypatch.setattr(_program_cache, "_equinox_on_error", lambda: "nan")
+    for args in ((x, 1.5, 3), (jnp.ones(8), 1.5, 3), (x, 1.5, 2), (x, 2.5, 3)):
+        out = _program_cache.call(_toy, *args)
+        np.testing.assert_array_equal(np.asarray(out["y"]), np.asarray(_toy(*args)["y"]))
+    assert len(_entries(store)) == 4
+
+
+def test_scene_options_change_the_key(store):
+    """A scene option changes the mechanism's composition, hence the key."""
+    from jaxdeploy.scenes import get_scene
+
+    keys = set()
+    for rule in ("onset", "running_max"):
+        scene = get_scene("impact", impact_velocity_rule=rule)
+        keys.add(_program_cache.key(_toy, (scene.build(scene.resolve_params()),)))
+    assert len(keys) == 2 and None not in keys
+
+
+def test_what_cannot_be_keyed_runs_uncached(store):
+    x = jnp.ones(3)
+    offset = 2.0
+    closure = lambda y: y + offset  # noqa: E731 - carries data its name does not say
+    assert _program_cache.key(_toy, (x, closure, 1)) is None
+    assert _program_cache.key(_toy, (x, object(), 1)) is None
+    assert _program_cache.key(_toy, (x, jnp.sum, 1)) is not None  # a library function
+
+    @eqx.filter_jit
+    def outer(x):
+        return _program_cache.call(_toy, x, 2.0, 2)["y"]  # traced: the caller's program
+
+    np.testing.assert_array_equal(np.asarray(outer(x)), np.asarray(_toy(x, 2.0, 2)["y"]))
+    assert _entries(store) == []
+
+
+def test_equinox_host_callbacks_make_it_uncached(store, monkeypatch):
+    monkeypatch.setattr(_program_cache, "_equinox_on_error", lambda: "raise")
+    assert _program_cache.key(_toy, (jnp.ones(3), 1.0, 1)) is None
+
+
+def test_a_corrupt_entry_is_ignored_with_a_warning_and_replaced(store):
+    x = jnp.linspace(0.0, 1.0, 5)
+    _program_cache.call(_toy, x, 1.5, 3)
+    (name,) = _entries(store)
+    (store / name).write_bytes(b"not a program")
+    with pytest.warns(RuntimeWarning, match="unreadable program cache entry"):
+        out = _program_cache.call(_toy, x, 1.5, 3)
+    np.testing.assert_array_equal(np.asarray(out["y"]), np.asarray(_toy(x, 1.5, 3)["y"]))
+    assert _program_cache._load(str(store / name)) is not None  # written again
+
+
+def test_the_command_line_puts_it_beside_the_compilation_cache(tmp_path, monkeypatch):
+    from jaxdeploy import _compilation_cache
+
+    monkeypatch.setattr(_compilation_cache, "cache_dir", lambda: str(tmp_path / "xla"))
+    try:
+        _compilation_cache.enable_compilation_cache()
+        assert _program_cache.folder() == str(tmp_path / "xla-programs")
+        monkeypatch.setattr(_compilation_cache, "cache_dir", lambda: None)  # =off
+        _compilation_cache.enable_compilation_cache()
+        assert _program_cache.folder() is None
+    finally:
+        _program_cache.enable(None)
+
+
+# In a fresh process with EQX_ON_ERROR=nan (as the command line runs): a scene simulated
+# without the store, then through it twice (the entry written, then read back from the disk).
+_SIMULATE_THREE_WAYS = """
+import sys
+import numpy as np
+from jaxdeploy import _program_cache
+from jaxdeploy.scenes import get_scene
+from jaxdeploy.simulation import simulate
+
+scene = get_scene(sys.argv[2])
+params = scene.resolve_params()
+mechanism = scene.build(params)
+initial = scene.initial_state(params, mechanism)
+t_end = float(sys.argv[3])
+run = lambda: simulate(mechanism, initial, t_end, control=scene.default_control, n_save=21)
+runs = [run()]
+_program_cache.enable(sys.argv[1])
+runs += [run(), run()]
+for name in ("ts", "q", "v", "qdd", "lam"):
+    a, b, c = (np.asarray(getattr(r, name)) for r in runs)
+    assert a.tobytes() == b.tobytes() == c.tobytes(), name
+for leaf in ("num_steps", "num_rejected_steps"):
+    assert int(runs[0].stats[leaf]) == int(runs[2].stats[leaf]), leaf
+assert int(runs[2].stats["num_steps"]) > 0
+assert runs[0].ok and runs[2].ok
+print("identical", int(runs[0].stats["num_steps"]))
+"""
+
+
+@pytest.mark.parametrize(
+    "scene, t_end",
+    [
+        ("pendulum", 0.5),
+        # a clearance joint: events, contact memory, tracked extremes
+        pytest.param("slider_crank", 2e-3, marks=pytest.mark.slow),
+    ],
+)
+def test_simulate_through_the_store_is_bit_identical(tmp_path, scene, t_end):
+    env = {**os.environ, "EQX_ON_ERROR": "nan", "JAX_PLATFORMS": "cpu"}
+    script = textwrap.dedent(_SIMULATE_THREE_WAYS)
+    done = subprocess.run(
+        [sys.executable, "-c", script, str(tmp_path / "p"), scene, str(t_end)],
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "identical" in done.stdout
+    assert len(list((tmp_path / "p").glob("*.jaxexport"))) == 1
