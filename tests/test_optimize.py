@@ -182,7 +182,15 @@ def test_optimize_command_refuses_bad_input_before_running(tmp_path, capsys):
         (["--steps", "0"], "--steps = 0 is invalid"),
         (["--param", "panel1_ra", "--param", "panel1_ra"], "--param panel1_ra is given twice"),
         (["--param", "panel1_ra", "--set", "panel1_ra=1e-6"], "both a design parameter"),
-    ]
+        (["--scene-option", "friction_roughness"], "--scene-option expects KEY=VALUE"),
+        (["--scene-option", "friction_roughness=x"], "--scene-option: friction_roughness = 'x'"),
+        (["--scene", "pendulum", "--scene-option", "latch=x"], "--scene-option: "),
+        (["--scene", "nope"], "unknown scene 'nope'"),
+        # The option reaches the scene: with ploughing friction μ is no longer a parameter.
+        (["--scene-option", "friction_roughness=ploughing", "--set", "friction_coefficient=0.1"],
+         "counts with --scene-option friction_roughness=constant"),
+        (["--set", "friction_adhesion=0.02"], "--scene-option friction_roughness=ploughing"),
+    ]  # fmt: skip
     for extra, message in cases:
         assert main(["optimize", "--out", out, *extra]) == 2
         assert message in capsys.readouterr().err
@@ -194,9 +202,10 @@ def test_optimize_command_refuses_bad_input_before_running(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_optimize_command_end_to_end_on_a_short_deployment(tmp_path, capsys):
-    """Two smoothed steps on panel 2's Ra over a 0.65 s deployment: writes the optimum, the
-    history and the plot; the design stays inside the machinable box; one progress line per
-    iteration with its count, elapsed time and (after the first, which compiles) an ETA."""
+    """Two smoothed steps on panel 2's Ra over a 0.65 s deployment, with ploughing friction
+    (`--scene-option`, recorded): writes the optimum, the history and the plot; the design
+    stays inside the machinable box; one progress line per iteration with its count, elapsed
+    time and (after the first, which compiles) an ETA."""
     import json
 
     from jaxdeploy.cli import main
@@ -217,6 +226,8 @@ def test_optimize_command_end_to_end_on_a_short_deployment(tmp_path, capsys):
             "2",
             "--pairs",
             "1",
+            "--scene-option",
+            "friction_roughness=ploughing",
             "--out",
             str(out),
         ]
@@ -230,6 +241,7 @@ def test_optimize_command_end_to_end_on_a_short_deployment(tmp_path, capsys):
     assert len(record["history"]) == 2 and (out / "history.png").exists()
     assert 0.2e-6 <= record["optimum"]["panel2_ra"] <= 6.3e-6
     assert record["seed"] == 0 and "jax" in record["versions"]
+    assert record["scene_options"]["friction_roughness"] == "ploughing"
 
 
 @pytest.mark.slow

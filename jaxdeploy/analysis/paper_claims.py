@@ -183,6 +183,30 @@ MU_RAD = 1e6  # rad → µrad
 UM_PER_M = 1e6
 
 
+def per_panel_axis(ev: Evidence, suffix, cases, judge):
+    """`(checks, texts)` of a claim about both panels' centre deviations along X and Y: for
+    each metric `{panel}_centre_{axis}_{suffix}`, `judge(metric)` gives `(verdict, note)`, and
+    the text lists the values over `cases` [µm] with the note."""
+    checks, texts = [], []
+    for panel in PANELS:
+        for axis in "xy":
+            m = f"{panel}_centre_{axis}_{suffix}"
+            verdict, note = judge(m)
+            checks.append(verdict)
+            texts.append(f"{panel} {axis.upper()}: {ev.fmt(m, cases, UM_PER_M)} µm ({note})")
+    return checks, texts
+
+
+def trend_judge(ev: Evidence, cases, expected):
+    """A `per_panel_axis` judge: the metric's trend over `cases` against `expected`."""
+
+    def judge(metric):
+        t = ev.trend(metric, cases)
+        return trend_verdict(t, expected), "".join(t)
+
+    return judge
+
+
 def claims(ev: Evidence, clearance=True):
     """The claims of W24 §4 as rows `{id, figure, claim, ours, verdict}`; `clearance=False`:
     the roughness claims (R*) only (for runs of the roughness cases alone)."""
@@ -217,13 +241,7 @@ def claims(ev: Evidence, clearance=True):
         f"10 % settling time = {ev.fmt('angle_settling', R, 1e3, 'ms')}; trend {''.join(t)}",
         trend_verdict(t, (">", ">")),
     )
-    checks, texts = [], []
-    for panel in PANELS:
-        for axis in "xy":
-            m = f"{panel}_centre_{axis}_deploy"
-            t = ev.trend(m, R)
-            checks.append(trend_verdict(t, (">", ">")))
-            texts.append(f"{panel} {axis.upper()}: {ev.fmt(m, R, UM_PER_M)} µm ({''.join(t)})")
+    checks, texts = per_panel_axis(ev, "deploy", R, trend_judge(ev, R, (">", ">")))
     add(
         "R4",
         "10–13",
@@ -232,13 +250,7 @@ def claims(ev: Evidence, clearance=True):
         "; ".join(texts),
         verdict_from(checks),
     )
-    checks, texts = [], []
-    for panel in PANELS:
-        for axis in "xy":
-            m = f"{panel}_centre_{axis}_flutter"
-            t = ev.trend(m, R)
-            checks.append(trend_verdict(t, (">", ">")))
-            texts.append(f"{panel} {axis.upper()}: {ev.fmt(m, R, UM_PER_M)} µm ({''.join(t)})")
+    checks, texts = per_panel_axis(ev, "flutter", R, trend_judge(ev, R, (">", ">")))
     add(
         "R5",
         "10–13",
@@ -246,13 +258,12 @@ def claims(ev: Evidence, clearance=True):
         "max |deviation| in the first 0.1 s after lock: " + "; ".join(texts),
         verdict_from(checks),
     )
-    checks, texts = [], []
-    for panel in PANELS:
-        for axis in "xy":
-            m = f"{panel}_centre_{axis}_late_rms"
-            ratio, v = spread_verdict(ev, m, R, 2.0)
-            checks.append(v)
-            texts.append(f"{panel} {axis.upper()}: {ev.fmt(m, R, UM_PER_M)} µm (×{ratio:.1f})")
+
+    def similar(metric):
+        ratio, verdict = spread_verdict(ev, metric, R, 2.0)
+        return verdict, f"×{ratio:.1f}"
+
+    checks, texts = per_panel_axis(ev, "late_rms", R, similar)
     add(
         "R6",
         "10–13",
@@ -378,13 +389,7 @@ def claims(ev: Evidence, clearance=True):
         f"10 % settling time: {ev.fmt('angle_settling', C, 1e3, 'ms')}; trend {''.join(t)}",
         trend_verdict(t, (">", ">")),
     )
-    checks, texts = [], []
-    for panel in PANELS:
-        for axis in "xy":
-            m = f"{panel}_centre_{axis}_deploy"
-            t = ev.trend(m, C)
-            checks.append(trend_verdict(t, ("<", "<")))
-            texts.append(f"{panel} {axis.upper()}: {ev.fmt(m, C, UM_PER_M)} µm ({''.join(t)})")
+    checks, texts = per_panel_axis(ev, "deploy", C, trend_judge(ev, C, ("<", "<")))
     add(
         "C3",
         "17–20",

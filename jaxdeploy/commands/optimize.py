@@ -8,6 +8,7 @@ from __future__ import annotations
 import sys
 
 from ._args import (
+    SCENE_OPTION_HELP,
     SET_HELP,
     add_step_control,
     check_used,
@@ -15,6 +16,7 @@ from ._args import (
     parse_assignments,
     positive,
     refuse,
+    scene_of,
     step_control,
 )
 
@@ -25,6 +27,9 @@ DEFAULT_PARAMS = ("panel1_ra", "panel2_ra", "panel1_clearance", "panel2_clearanc
 
 def add_arguments(parser) -> None:
     parser.add_argument("--scene", default="deploy_array", help="scene (needs panel channels)")
+    parser.add_argument(
+        "--scene-option", action="append", default=[], metavar="KEY=VALUE", help=SCENE_OPTION_HELP
+    )
     parser.add_argument(
         "--objective",
         action="append",
@@ -167,13 +172,13 @@ def run(args) -> int:
     from ..io import check_output_dir, default_output_dir
     from ..objectives import parse_objective
     from ..optimize import Box, machinable_bounds
-    from ..scenes import SCENES, get_scene
 
     # Every refusal happens here, before anything is written or compiled (the ideal
     # reference run of `DesignProblem` is a simulation: it comes after).
-    if args.scene not in SCENES:
-        return refuse(f"unknown scene {args.scene!r}; valid: {', '.join(sorted(SCENES))}")
-    scene = get_scene(args.scene)
+    try:
+        scene = scene_of(args.scene, args)
+    except ValueError as err:
+        return refuse(str(err))
     try:
         objective = parse_objective(args.objective or ["paper"])
         bounds = _parse_params(args.param, scene, machinable_bounds)
@@ -265,6 +270,7 @@ def _optimize(args, scene, objective, bounds, fixed, x0, control, out, began) ->
     )
     record = {
         "scene": args.scene,
+        "scene_options": scene.options,
         "status": result.status,
         "objective": [f"{t.label}={t.weight}" for t in objective.terms],
         "gradient": "pathwise" if pathwise else ("robust" if args.robust else "smoothed"),
