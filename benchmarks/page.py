@@ -165,6 +165,15 @@ def render(record, wp, targets, *, command, cut) -> str:
             f"solve | {c['speedup_per_solve']:.2f}× (the simulation reaches "
             f"{_f(share, '.0%')} of it) | (reference) | – |"
         )
+        st = c.get("step")
+        if st:
+            share = b["speedup_per_simulation"] / st["speedup_per_case"] if b else math.nan
+            lines.append(
+                f"| ceiling of the step's own linear algebra ({st['scene']}: iteration-matrix "
+                f"inverse + index-1 accelerations), one / {st['cases']} vmapped, per case | "
+                f"{st['speedup_per_case']:.2f}× (the simulation reaches {_f(share, '.0%')} of "
+                "it) | (reference) | – |"
+            )
     g = targets.get("gradient")
     if g:
         lines.append(
@@ -238,9 +247,20 @@ def render(record, wp, targets, *, command, cut) -> str:
             f"({b['vmap_warm_s']:.3g} s warm, compile {b['vmap_compile_s']:.3g} s; accepted steps "
             f"{b['steps_min_max'][0]}–{b['steps_min_max'][1]} per case) against one at a time "
             f"(mean of {b['singles_timed']} cases spread over the range, compile "
-            f"{b['one_at_a_time_compile_s']:.3g} s). The ceiling: {c['iterations']} chained "
+            f"{b['one_at_a_time_compile_s']:.3g} s). Solver: one at a time "
+            f"`{b.get('one_at_a_time_solver', '?')}` (modified Newton), the vmap "
+            f"`{b.get('vmap_solver', '?')}` (`jaxdeploy.batch.vmapped_control`: a vmapped "
+            "modified Newton refreshes its matrix for every case whenever one case needs it). "
+            f"The ceilings: {c['iterations']} chained "
             f"{c['size']}×{c['size']} `jnp.linalg.solve` ({c['one_s']:.3g} s for one system, "
-            f"{c['vmapped_s']:.3g} s for {c['cases']} vmapped).",
+            f"{c['vmapped_s']:.3g} s for {c['cases']} vmapped)"
+            + (
+                f"; {c['step']['iterations']} chained evaluations of the step's linear algebra "
+                f"({c['step']['one_s']:.3g} s for one case, {c['step']['vmapped_s']:.3g} s for "
+                f"{c['step']['cases']} vmapped)."
+                if c.get("step")
+                else "."
+            ),
             "",
         ]
     if g:

@@ -31,7 +31,7 @@ def batch(cases: int = 256, singles: int = 8, t_end: float = 4e-3) -> dict:
     import jax
     import jax.numpy as jnp
 
-    from jaxdeploy.batch import batch_function, run_scene
+    from jaxdeploy.batch import batch_function, run_scene, vmapped_control
     from jaxdeploy.scenes import SliderCrank
 
     scene = SliderCrank()
@@ -39,6 +39,8 @@ def batch(cases: int = 256, singles: int = 8, t_end: float = 4e-3) -> dict:
     restitution = np.linspace(0.8, 0.99, cases)
     shared.pop("restitution")
     ts = jnp.linspace(0.0, t_end, 401)
+    # The batch runs as `simulate_batch` does (`vmapped_control`: generalized-α with Newton
+    # proper); one at a time is a single run's default (modified Newton).
     vmapped = batch_function(scene, ("restitution",), shared, t_end, ts)
     compile_vmap, _ = _timed(vmapped, (jnp.asarray(restitution),))
     warm_vmap, trajectory = _timed(vmapped, (jnp.asarray(restitution),))
@@ -63,6 +65,8 @@ def batch(cases: int = 256, singles: int = 8, t_end: float = 4e-3) -> dict:
         "one_at_a_time_compile_s": compile_one,
         "speedup_per_simulation": per_single / (warm_vmap / cases),
         "steps_min_max": [int(steps.min()), int(steps.max())],
+        "vmap_solver": vmapped_control(scene.default_control).solver_name(),
+        "one_at_a_time_solver": scene.default_control.solver_name(),
     }
 
 
@@ -95,6 +99,54 @@ def solve_ceiling(cases: int = 256, size: int = 16, iterations: int = 2000) -> d
         "one_s": t_one,
         "vmapped_s": t_many,
         "speedup_per_solve": cases * t_one / t_many,
+        "step": step_solves_ceiling(cases=cases, iterations=iterations),
+    }
+
+
+def step_solves_ceiling(cases: int = 256, iterations: int = 2000) -> dict:
+    """vmap's gain on the linear algebra of one slider_crank step alone, the ceiling for the
+    batched simulation: `iterations` chained evaluations of (a) the inverse of the
+    generalized-α iteration matrix's saddle-point form `[[M, Φ_qᵀ], [Φ_q, 0]]` (what a Newton
+    refresh factorises) and (b) the index-1 accelerations (`Mechanism.accelerations`, the
+    range-space solve of the error estimate and the saved states), each case with its own
+    restitution; one case against `cases` vmapped, same core."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxdeploy.scenes import SliderCrank
+
+    scene = SliderCrank()
+    base = dict(scene.resolve_params())
+
+    def chain(restitution):
+        params = {**base, "restitution": restitution}
+        mechanism = scene.build(params)
+        state = scene.initial_state(params, mechanism)
+        q, t = state.q, 0.0
+        jac = mechanism.constraint_jacobian(q, t)
+        m = jac.shape[0]
+        kkt = jnp.block([[jnp.diag(mechanism.mass_diagonal()), jac.T], [jac, jnp.zeros((m, m))]])
+
+        def body(_, v):
+            inverse = jnp.linalg.inv(kkt + 1e-9 * jnp.diag(jnp.concatenate([v, v[:m]])))
+            qdd, _ = mechanism.accelerations(q, v, t, state.memory)
+            return v + 1e-12 * (qdd + inverse[: v.shape[0], 0])
+
+        return jax.lax.fori_loop(0, iterations, body, state.v)
+
+    restitution = jnp.linspace(0.8, 0.99, cases)
+    single, many = jax.jit(chain), jax.jit(jax.vmap(chain))
+    _timed(single, restitution[0])
+    _timed(many, restitution)
+    t_one = min(_timed(single, restitution[0])[0] for _ in range(3))
+    t_many = min(_timed(many, restitution)[0] for _ in range(3))
+    return {
+        "scene": "slider_crank",
+        "cases": cases,
+        "iterations": iterations,
+        "one_s": t_one,
+        "vmapped_s": t_many,
+        "speedup_per_case": cases * t_one / t_many,
     }
 
 
