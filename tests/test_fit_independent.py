@@ -66,16 +66,18 @@ def test_twelve_milliseconds_of_impacts_with_the_defaults(tmp_path, monkeypatch)
 @pytest.mark.slow
 def test_twelve_milliseconds_with_friction_fits_mu_too(tmp_path, monkeypatch):
     """μ = 0.01 with the reference's tanh-regularised Coulomb law: c, c_e and μ from 20 %
-    off. At the estimate this model need not be reproducible at the noise level (the
-    tolerance check has moved it by several noise levels: docs/identification.md), which the
-    command reports with exit 5; the estimates must reach the truth either way."""
+    off. The tolerance chosen at the start point is not tight enough at the estimate (the
+    check moves the model by ~10 noise levels: docs/identification.md); the command refits
+    at tighter tolerances until the check passes, and exits 0."""
     monkeypatch.chdir(ROOT)
     out = tmp_path / "fit"
     argv = ["fit", "examples/slider_crank_friction_slider_x_12ms.csv", "--scene",
             "slider_crank", "--scene-option", "friction_shape=tanh", "--params",
             "clearance=6e-4", "restitution=0.72", "friction_coefficient=0.012",
             "--out", str(out), "--quiet"]  # fmt: skip
-    _assert_recovered(main(argv), out, allowed=(0, 5))
+    _assert_recovered(main(argv), out)
+    report = json.loads((out / "fit.json").read_text())
+    assert report["reproducible"] and report["schedule"]["tolerance_refits"]
 
 
 @pytest.mark.slow

@@ -10,7 +10,14 @@ docs/identification.md.
 
 from ._data import MeasurementError, Measurements, load_measurements
 from ._derivatives import central_differences, output_function, parameter_jacobian
-from ._fit import FitResult, fit, levenberg_marquardt, tolerance_check
+from ._fit import (
+    RTOL_CHECK_FLOOR,
+    FitResult,
+    fit,
+    levenberg_marquardt,
+    refit_until_reproducible,
+    tolerance_check,
+)
 from ._parameters import FitParameter, check_not_ignored, make_parameters, parse_param_spec
 from ._plots import plot_fit
 from ._residuals import Comparison, ResidualSpec
@@ -18,12 +25,14 @@ from ._schedule import RTOL_FLOOR, choose_tolerance, impact_horizons, onset_time
 from ._synthetic import model_channels, synthesize
 
 __all__ = [
+    "RTOL_CHECK_FLOOR",
     "RTOL_FLOOR",
     "Comparison",
     "check_not_ignored",
     "choose_tolerance",
     "impact_horizons",
     "onset_times",
+    "refit_until_reproducible",
     "run_channels",
     "tolerance_check",
     "central_differences",
