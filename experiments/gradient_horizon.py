@@ -157,7 +157,8 @@ def main(argv=None):
         return "stop" if x is None else f"{x:.1g}"
 
     lines = [
-        f"`experiments/gradient_horizon.py`: default deploy_array run to {t_end:g} s "
+        f"`experiments/gradient_horizon.py` at commit {_commit()}: default deploy_array run "
+        f"to {t_end:g} s "
         f"({n_steps} accepted adaptive steps, replayed; latch locks at "
         f"{lock if lock is None else f'{lock:.3f}'} s). For each window: the largest "
         "|p dy/dp| (forward-mode AD), ‖FD_h − AD‖/‖AD‖ for central differences over the same "
@@ -184,6 +185,15 @@ def main(argv=None):
     replace_block(
         os.path.join(ROOT, "docs/identification.md"), "gradient_horizon", "\n".join(lines)
     )
+
+
+def _commit() -> str:
+    """The checkout's commit (the page says which commit made its numbers)."""
+    import subprocess
+
+    done = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                          text=True, cwd=ROOT, check=True)  # fmt: skip
+    return done.stdout.strip()
 
 
 if __name__ == "__main__":

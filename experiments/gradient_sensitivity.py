@@ -129,7 +129,8 @@ def main():
     fig.savefig(os.path.join(ROOT, "docs/figures/gradient_sensitivity.png"), dpi=110)
 
     lines = [
-        f"`experiments/gradient_sensitivity.py`: d y(t)/d `{PARAM}` on the default 2 s "
+        f"`experiments/gradient_sensitivity.py` at commit {_commit()}: d y(t)/d `{PARAM}` on "
+        "the default 2 s "
         "deploy_array run (rtol 1e-6). Columns: ‖AD − FD‖/‖FD‖ for central differences with "
         "steps 1e-2 c and 1e-3 c, pointwise and for 0.05 s block means; noise ratio = "
         "‖y(rtol 1e-6) − y(rtol 1e-7)‖ / ‖10⁻³ c dy/dc‖ (above ~1 a 0.1 % change of c is "
@@ -152,6 +153,15 @@ def main():
     replace_block(
         os.path.join(ROOT, "docs/identification.md"), "gradient_sensitivity", "\n".join(lines)
     )
+
+
+def _commit() -> str:
+    """The checkout's commit (the page says which commit made its numbers)."""
+    import subprocess
+
+    done = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                          text=True, cwd=ROOT, check=True)  # fmt: skip
+    return done.stdout.strip()
 
 
 if __name__ == "__main__":

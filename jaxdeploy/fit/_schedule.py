@@ -13,7 +13,10 @@ Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.4). A model error of 0.2 σ RM
 `RTOL_FLOOR`: below it the error estimate of a float64 run is round-off (slider_crank at
 rtol 1e-11 stalls at 6 ms with 2e6 steps). After the fit `tolerance_check` repeats the
 comparison at the estimate and computes the Gauss–Newton step a refit at the tighter
-tolerance would take, in standard errors.
+tolerance would take, in standard errors; where it fails, the command refits from the
+estimate at 10x tighter tolerances until it passes (`refit_until_reproducible`): the start
+point's model error need not be the estimate's (a start that bounces less accumulates less
+integration error over the record).
 
 **Horizons.** Each impact multiplies the sensitivity of the later motion to the parameters, so
 the loss over many impacts is rugged (local minima a few per cent apart) while over a few it is
