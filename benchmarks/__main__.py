@@ -24,7 +24,6 @@ MEASURES = [
     "jaxdeploy/cli.py",
     "jaxdeploy/commands/simulate.py",
     "jaxdeploy/contact",
-    "jaxdeploy/lanes.py",
     "jaxdeploy/mechanism",
     "jaxdeploy/scenes",
     "jaxdeploy/simulation.py",
@@ -37,7 +36,7 @@ CUT = [
     "Work–precision over the first 4 ms of slider_crank only (the reference fixture's fine "
     "grid), not two revolutions, and not deploy_array (its implicit configurations take hours).",
     "Batch over 4 ms of slider_crank; one-at-a-time cost is the mean of 8 cases, not 256; no "
-    "`lanes` or `group_size` variants, no two-core batch.",
+    "`group_size` variant, no two-core batch.",
     "Gradient over 0.2 s of deploy_array, not its 2 s; no check against central differences.",
 ]
 

@@ -19,7 +19,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .lanes import DEFAULT_SEGMENT_STEPS, check_lane_options, check_lanes, simulate_in_lanes
 from .scenes.base import Scene
 from .simulation import Trajectory, simulate
 from .solvers import GeneralizedAlpha
@@ -173,8 +172,6 @@ def batch_function(
     control: StepControl | Mapping | None = None,
     evaluate=None,
     group_size: int | None = None,
-    lanes: int | None = None,
-    segment_steps: int = DEFAULT_SEGMENT_STEPS,
     sharding=None,
     **simulate_options,
 ):
@@ -194,16 +191,11 @@ def batch_function(
 
     Generalized-α runs with Newton's method proper in a batch (`vmapped_control`).
 
-    `lanes`: instead, integrate the cases in that many vmapped lanes, a lane that finishes its
-    case taking the next pending one after at most `segment_steps` steps
-    (`jaxdeploy.lanes`): no lane idles while cases remain, only the last few cases' lanes.
-    Each case takes the steps a vmapped group gives it, its states equal to round-off.
-
     `sharding` (a `NamedSharding` over a 1-D mesh, as `jaxdeploy.sweep` places its inputs):
     each device runs the policy on its own shard of the cases (`jax.shard_map`), with no
-    communication (lanes, groups or the vmap are per device).
+    communication (groups or the vmap are per device).
     """
-    check_policy(group_size, lanes, segment_steps)
+    check_policy(group_size)
     control, simulate_options = _control_and_options(scene, control, simulate_options)
     control = vmapped_control(control)
 
@@ -215,36 +207,7 @@ def batch_function(
         trajectory = run_scene(scene, params, t_end, ts=ts, control=control, **simulate_options)
         return trajectory if evaluate is None else (trajectory, evaluate(params, trajectory))
 
-    if lanes is not None:
-        resolved, options = _control_and_options(scene, control, simulate_options)
-        options["control"] = resolved
-        check_lane_options(options)
-
-        def prepare(varied_values):
-            params = params_of(varied_values)
-            mechanism = scene.build(params)
-            return mechanism, scene.initial_state(params, mechanism)
-
-        def in_lanes(values):
-            trajectory = simulate_in_lanes(
-                prepare,
-                values,
-                t_end,
-                ts,
-                lanes=lanes,
-                segment_steps=segment_steps,
-                options=options,
-            )
-            if evaluate is None:
-                return trajectory
-
-            def features(varied_values, case):
-                return evaluate(params_of(varied_values), case)
-
-            return trajectory, jax.vmap(features)(values, trajectory)
-
-        run = in_lanes
-    elif group_size is None:
+    if group_size is None:
         run = jax.vmap(one)
     else:
         run = lambda values: jax.lax.map(one, values, batch_size=group_size)  # noqa: E731
@@ -256,20 +219,12 @@ def batch_function(
     )
 
 
-def check_policy(group_size, lanes, segment_steps=DEFAULT_SEGMENT_STEPS) -> None:
-    """Refuse a batch policy that is not one of: all at once (both None), `group_size` ≥ 1,
-    `lanes` ≥ 1 (with `segment_steps` ≥ 1)."""
+def check_policy(group_size) -> None:
+    """Refuse a batch policy that is not one of: all at once (None), `group_size` ≥ 1."""
     if group_size is not None and not (
         isinstance(group_size, int) and not isinstance(group_size, bool) and group_size >= 1
     ):
         raise ValueError(f"group_size = {group_size!r} is invalid: it must be an integer ≥ 1")
-    if lanes is not None:
-        check_lanes(lanes, segment_steps)
-        if group_size is not None:
-            raise ValueError(
-                f"group_size = {group_size!r} and lanes = {lanes!r}: give one batch policy, "
-                "not both"
-            )
 
 
 def simulate_batch(
@@ -282,8 +237,6 @@ def simulate_batch(
     n_save: int = 1001,
     control: StepControl | Mapping | None = None,
     group_size: int | None = None,
-    lanes: int | None = None,
-    segment_steps: int = DEFAULT_SEGMENT_STEPS,
     **simulate_options,
 ) -> Batch:
     """Simulate many parameter sets of `scene` as one vmapped run (one compilation).
@@ -296,16 +249,13 @@ def simulate_batch(
       every case (same saved times).
     - `group_size`: vmap the cases in groups of this many, run one after another in the same
       compiled program (see `batch_function`); `None` vmaps all at once.
-    - `lanes`: run the cases in this many refilled lanes instead (`jaxdeploy.lanes`): a lane
-      that finishes its case takes the next, so no case waits for a slower one (adaptive
-      steps; only `simulate`'s step-control and solver options). `segment_steps`: steps
-      between refills.
 
     **Returns:** a `Batch`. Cases advance together in one `while` loop: each step costs the
     whole batch, and the batch runs until its slowest case finishes (cases that finished
-    early wait, masked), unless `lanes` refills them. Measured: docs/batch_throughput.md.
+    early wait, masked). Generalized-α runs with Newton's method proper (`vmapped_control`).
+    Measured: docs/performance.md.
     """
-    check_policy(group_size, lanes, segment_steps)
+    check_policy(group_size)
     table, varied, shared = stack_cases(scene, cases, fixed)
     t_end = scene.default_t_end if t_end is None else t_end
     ts = jnp.linspace(0.0, t_end, n_save) if ts is None else jnp.asarray(ts, dtype=float)
@@ -318,8 +268,6 @@ def simulate_batch(
             ts,
             control=control,
             group_size=group_size,
-            lanes=lanes,
-            segment_steps=segment_steps,
             **simulate_options,
         )
         trajectory = run(tuple(jnp.asarray(table[k]) for k in varied))

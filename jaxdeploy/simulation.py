@@ -145,7 +145,7 @@ def integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **op
     (`jaxdeploy.solvers.stop_at_non_finite`). `options`: `saveat`, `adjoint`, …
 
     The lower-level half of `simulate`, for callers that drive the integration themselves
-    (`jaxdeploy.lanes` pauses and resumes runs): give it the pieces `prepare` returns."""
+    (e.g. pause and resume runs): give it the pieces `prepare` returns."""
     time_scale = jnp.maximum(jnp.abs(t0), jnp.abs(t_end))
     return dfx.diffeqsolve(
         MechanismTerm(mechanism),
@@ -409,7 +409,7 @@ def prepare(
     """Validate `simulate`'s arguments (the same keywords) and build its solver, step-size
     controller, initial state and times: `simulate` is `integrate` of these pieces. Public
     for callers that must integrate exactly as `simulate` does while driving the loop
-    themselves (the lane-refilled batches of `jaxdeploy.lanes`)."""
+    themselves (`integrate`)."""
     control = _step_control(
         control,
         solver=solver,

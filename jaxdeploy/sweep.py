@@ -7,8 +7,8 @@ each chunk is one compiled batch (`batch.batch_function`, compiled once for the 
 batch axis is sharded over all local devices (a `NamedSharding` over a 1-D mesh of
 `jax.devices()`; the chunk is padded to a multiple of the device count with copies of its last
 case, dropped on output), so memory is bounded by one chunk, whatever the number of cases.
-Each device batches its shard by the sweep's `policy` (default: refilled lanes, the cheapest
-per simulation measured in docs/batch_throughput.md; see `parse_policy`).
+Each device batches its shard by the sweep's `policy` (default: one vmap of its shard; see
+`parse_policy`).
 
 Each finished chunk is written atomically as `chunk_NNNNN.npz` (case indices, parameters,
 status, step counts, optional per-case features, summaries and trajectories), then recorded in
@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._validation import check_positive
-from .batch import DEFAULT_SEGMENT_STEPS, batch_function, stack_cases, step_control
+from .batch import batch_function, stack_cases, step_control
 from .io import (
     atomic_write_json,
     atomic_write_npz,
@@ -53,20 +53,17 @@ from .scenes.base import Scene
 from .solvers.step_control import StepControl
 
 MANIFEST = "manifest.json"
-# How each chunk is batched (`parse_policy`), measured in docs/batch_throughput.md: lanes
-# refilled from the pending cases cost the least per simulation. One vmap of the whole chunk
-# (the only policy before; "all") cost the most: every case waits for the chunk's slowest.
-DEFAULT_POLICY = "lanes:8"
-# Cases per chunk: with lanes, a chunk must hold several times (lanes x devices) cases, or
-# only the tail of each chunk runs (its lanes idle as its last cases finish).
+# How each chunk is batched (`parse_policy`): one vmap of each device's shard. (Lanes refilled
+# from the pending cases, the default before, cost more per simulation than a plain vmap on
+# slider_crank and were removed.)
+DEFAULT_POLICY = "all"
 DEFAULT_CHUNK_SIZE = 64
 
 
 def parse_policy(text: str) -> dict:
-    """A batch policy, as the manifest records it: `"all"` (one vmap of the chunk),
-    `"groups:G"` (vmapped groups of G one after another) or `"lanes:L"` / `"lanes:L:K"` (L
-    lanes per device refilled every K steps, `jaxdeploy.lanes`; K default
-    `batch.DEFAULT_SEGMENT_STEPS`). Anything else is refused, naming the valid forms."""
+    """A batch policy, as the manifest records it: `"all"` (one vmap of the chunk) or
+    `"groups:G"` (vmapped groups of G one after another). Anything else is refused, naming the
+    valid forms."""
     parts = str(text).strip().split(":")
     try:
         numbers = [int(p) for p in parts[1:]]
@@ -78,12 +75,8 @@ def parse_policy(text: str) -> dict:
         return {"kind": "all"}
     if kind == "groups" and valid and len(numbers) == 1:
         return {"kind": "groups", "group_size": numbers[0]}
-    if kind == "lanes" and valid and len(numbers) in (1, 2):
-        steps = numbers[1] if len(numbers) == 2 else DEFAULT_SEGMENT_STEPS
-        return {"kind": "lanes", "lanes": numbers[0], "segment_steps": steps}
     raise ValueError(
-        f"policy = {text!r} is invalid; valid: 'all', 'groups:G' or 'lanes:L[:K]' with "
-        "integers G, L, K ≥ 1"
+        f"policy = {text!r} is invalid; valid: 'all' or 'groups:G' with an integer G ≥ 1"
     )
 
 
@@ -91,8 +84,6 @@ def _policy_options(policy: dict) -> dict:
     """`batch_function` keywords of a parsed policy."""
     if policy["kind"] == "groups":
         return {"group_size": policy["group_size"]}
-    if policy["kind"] == "lanes":
-        return {"lanes": policy["lanes"], "segment_steps": policy["segment_steps"]}
     return {}
 
 
@@ -129,7 +120,7 @@ def _definition(scene, grid, fixed, t_end, n_save, control, chunk_size, features
         "control": control.to_json(),
         "chunk_size": int(chunk_size),
         "features": features,
-        # The policy can change a case's round-off and so its steps (jaxdeploy.lanes).
+        # The policy can change a case's round-off and so its steps.
         "policy": policy,
     }
 
@@ -190,9 +181,9 @@ def sweep(
       scene's default); recorded in the manifest's definition.
     - `chunk_size`: cases per compiled run (bounds memory; rounded up to a multiple of the
       device count, and down to what the sweep needs: `chunk_shape`).
-    - `policy`: how a chunk's cases are batched on each device (`parse_policy`): `"lanes:L"`
-      (default `DEFAULT_POLICY`), `"groups:G"` or `"all"`. Recorded in the definition: it
-      can change a case's round-off and hence its steps.
+    - `policy`: how a chunk's cases are batched on each device (`parse_policy`): `"all"`
+      (default `DEFAULT_POLICY`) or `"groups:G"`. Recorded in the definition: it can change a
+      case's round-off and hence its steps.
     - `resume`: continue a sweep in `out_dir` (its definition must match); without it a
       non-empty `out_dir` is refused.
     - `evaluate(params, trajectory) -> {name: scalar}`: per-case features computed inside the

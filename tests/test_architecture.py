@@ -24,7 +24,6 @@ FLOORS = {
     "scenes": 5,
     "analysis": 6,
     "batch": 7,
-    "lanes": 7,
     "sweep": 7,
     "robustness": 7,
     "fit": 7,
@@ -133,14 +132,6 @@ def test_imports_go_down_the_floors_and_not_into_private_names():
     assert not found, (
         "imports against docs/architecture.md's floors (or private names):\n" + "\n".join(found)
     )
-
-
-def test_the_batching_wing_has_one_entry():
-    """`batch` is the way into batched runs: lane refilling (`lanes`) is its policy, used by
-    nothing else, and `lanes` integrates through `simulation`'s public functions."""
-    users = {importer for importer, target, name in _imports() if _unit(target) == "lanes"}
-    users |= {importer for importer, target, name in _imports() if name == "lanes"}
-    assert users <= {"jaxdeploy.batch", "jaxdeploy.lanes"}, users
 
 
 def test_no_import_inside_a_function_hides_a_cycle():

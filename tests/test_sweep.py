@@ -157,33 +157,32 @@ def test_sweep_killed_and_resumed_on_four_devices(tmp_path):
 def test_sweep_policy_is_parsed_recorded_and_checked_on_resume(tmp_path):
     """`policy`: refused unless valid (naming the forms); recorded in the definition, so a
     sweep cannot resume under another policy; sweeps written before it was recorded ran one
-    vmap per chunk and resume as `all`. Lanes give the cases the steps of one vmap."""
+    vmap per chunk and resume as `all`. Groups give the cases the steps of one vmap."""
     from jaxdeploy.scenes import Pendulum
     from jaxdeploy.sweep import parse_policy, sweep
 
     assert parse_policy("all") == {"kind": "all"}
     assert parse_policy("groups:8") == {"kind": "groups", "group_size": 8}
-    assert parse_policy("lanes:4:2") == {"kind": "lanes", "lanes": 4, "segment_steps": 2}
-    for bad in ("lanes", "lanes:0", "groups:2.5", "lanes:2:3:4", "vmap", "all:2", ""):
-        with pytest.raises(ValueError, match="valid: 'all', 'groups:G' or 'lanes:L"):
+    for bad in ("lanes:8", "groups", "groups:0", "groups:2.5", "groups:2:3", "vmap", "all:2", ""):
+        with pytest.raises(ValueError, match="valid: 'all' or 'groups:G'"):
             parse_policy(bad)
 
     scene = Pendulum()
     grid = {"initial_angle": [0.3, -1.2, 2.5, 0.05, -2.9]}
     common = dict(t_end=0.3, n_save=11, control={"rtol": 1e-7, "atol": 1e-9}, chunk_size=5)
-    with pytest.raises(ValueError, match="policy = 'lanes:0' is invalid"):
-        sweep(scene, grid, str(tmp_path / "bad"), policy="lanes:0", **common)
+    with pytest.raises(ValueError, match="policy = 'groups:0' is invalid"):
+        sweep(scene, grid, str(tmp_path / "bad"), policy="groups:0", **common)
     assert not (tmp_path / "bad").exists()
-    lanes = sweep(scene, grid, str(tmp_path / "lanes"), policy="lanes:2:3", **common)
+    groups = sweep(scene, grid, str(tmp_path / "groups"), policy="groups:2", **common)
     sweep(scene, grid, str(tmp_path / "all"), policy="all", **common)
-    assert lanes["definition"]["policy"] == {"kind": "lanes", "lanes": 2, "segment_steps": 3}
-    a, b = load_sweep(str(tmp_path / "lanes")), load_sweep(str(tmp_path / "all"))
-    assert len(set(b["num_steps"].tolist())) > 2  # the cases differ: lanes were refilled
+    assert groups["definition"]["policy"] == {"kind": "groups", "group_size": 2}
+    a, b = load_sweep(str(tmp_path / "groups")), load_sweep(str(tmp_path / "all"))
+    assert len(set(b["num_steps"].tolist())) > 2  # the cases differ
     np.testing.assert_array_equal(a["num_steps"], b["num_steps"])
     np.testing.assert_allclose(a["q"], b["q"], rtol=0, atol=1e-12)
 
     with pytest.raises(ValueError, match="defined differently"):
-        sweep(scene, grid, str(tmp_path / "lanes"), policy="groups:2", resume=True, **common)
+        sweep(scene, grid, str(tmp_path / "groups"), policy="all", resume=True, **common)
     # A manifest without a policy (written before it was recorded) resumes as "all".
     path = tmp_path / "all" / "manifest.json"
     manifest = json.loads(path.read_text())
@@ -191,7 +190,7 @@ def test_sweep_policy_is_parsed_recorded_and_checked_on_resume(tmp_path):
     path.write_text(json.dumps(manifest))
     assert sweep(scene, grid, str(tmp_path / "all"), policy="all", resume=True, **common)
     with pytest.raises(ValueError, match="defined differently"):
-        sweep(scene, grid, str(tmp_path / "all"), policy="lanes:2", resume=True, **common)
+        sweep(scene, grid, str(tmp_path / "all"), policy="groups:2", resume=True, **common)
 
 
 def test_sweep_cli_refuses_a_bad_policy(tmp_path):
@@ -199,5 +198,5 @@ def test_sweep_cli_refuses_a_bad_policy(tmp_path):
 
     out = tmp_path / "s"
     code = main(["sweep", "--scene", "pendulum", "--grid", "length=1,2", "--out", str(out),
-                 "--policy", "lanes:x", "--quiet"])  # fmt: skip
+                 "--policy", "groups:x", "--quiet"])  # fmt: skip
     assert code == 2 and not out.exists()

@@ -64,9 +64,8 @@ def add_arguments(parser) -> None:
         "--policy",
         default=None,
         metavar="POLICY",
-        help="how each device batches its cases: lanes:L[:K] (L lanes refilled every K steps, "
-        "the default lanes:8), groups:G (vmapped groups of G) or all (one vmap); recorded in "
-        "the manifest (docs/batch_throughput.md)",
+        help="how each device batches its cases: all (one vmap, the default) or groups:G "
+        "(vmapped groups of G one after another); recorded in the manifest",
     )
     parser.add_argument(
         "--objective",

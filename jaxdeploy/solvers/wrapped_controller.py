@@ -1,4 +1,4 @@
-"""A step-size controller that wraps another adaptive one (`LocateEvents`, the lanes' `_Resume`).
+"""A step-size controller that wraps another adaptive one (`LocateEvents`).
 
 diffrax asks an adaptive controller for its `rtol`, `atol` and `norm` (e.g. to couple an
 implicit solver's root-finder tolerances to them) and calls `wrap(direction)` on it before
