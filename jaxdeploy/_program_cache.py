@@ -53,6 +53,7 @@ import warnings
 
 _folder: str | None = None
 _unexportable: set[str] = set()
+_loaded: dict[str, tuple] = {}
 
 # JAX settings that change what a function traces to (dtypes, precision, promotion rules).
 _TRACE_SETTINGS = (
@@ -185,7 +186,9 @@ def call(fn, *args):
     if cache_key is None:
         return fn(*args)
     path = os.path.join(where, f"{cache_key}.jaxexport")
-    entry = _load(path)
+    # Read once per process: the same `Exported` object reuses its compiled executable, where
+    # a new one read from the disk would be compiled again (a fit or a sweep calls again).
+    entry = _loaded.get(cache_key) or _load(path)
     if entry is None:
         payload = None if cache_key in _unexportable else _export(fn, args)
         if payload is None:
@@ -196,6 +199,7 @@ def call(fn, *args):
         # that wrote the entry would give outputs that differ from a later hit's in them
         # (and so miss the keys of the programs they flow into).
         entry = _decode(payload)
+    _loaded[cache_key] = entry
     exported, skeleton = entry
     arrays = [x for x in jax.tree.leaves(args) if eqx.is_array(x)]
     results = iter(exported.call(*arrays))

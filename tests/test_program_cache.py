@@ -8,6 +8,7 @@ import sys
 import textwrap
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -27,6 +28,7 @@ def store(tmp_path, monkeypatch):
     callbacks (the toy program has none either way)."""
     monkeypatch.setattr(_program_cache, "_equinox_on_error", lambda: "nan")
     monkeypatch.setattr(_program_cache, "_unexportable", set())
+    monkeypatch.setattr(_program_cache, "_loaded", {})
     _program_cache.enable(str(tmp_path / "programs"))
     yield tmp_path / "programs"
     _program_cache.enable(None)
@@ -40,12 +42,32 @@ def test_a_hit_reads_the_stored_program_and_gives_the_functions_result(store):
     x = jnp.linspace(0.1, 2.0, 7)
     first = _program_cache.call(_toy, x, 1.5, 3)
     assert len(_entries(store)) == 1
+    _program_cache._loaded.clear()  # as in a new process: read from the disk
     again = _program_cache.call(_toy, x + 1.0, 1.5, 3)  # new values, same program
     assert len(_entries(store)) == 1
     direct = _toy(x + 1.0, 1.5, 3)
     assert first["n"] == again["n"] == 3  # a static output comes back as it was
     np.testing.assert_array_equal(np.asarray(again["y"]), np.asarray(direct["y"]))
     np.testing.assert_array_equal(np.asarray(first["y"]), np.asarray(_toy(x, 1.5, 3)["y"]))
+
+
+_compiles = []
+jax.monitoring.register_event_duration_secs_listener(
+    lambda event, duration, **kw: (
+        _compiles.append(event) if event == "/jax/core/compile/backend_compile_duration" else None
+    )
+)
+
+
+def test_a_process_compiles_a_stored_program_once(store):
+    """Calls after the first reuse the program read in this process (a fit or a sweep calls
+    again and again): nothing is compiled again."""
+    xs = [jnp.linspace(0.1, 2.0, 7) + k for k in range(3)]
+    _program_cache.call(_toy, xs[0], 1.5, 3)
+    before = len(_compiles)
+    for x in xs:
+        _program_cache.call(_toy, x, 1.5, 3)
+    assert len(_compiles) == before
 
 
 def test_code_options_and_shapes_each_miss(store, monkeypatch):
@@ -105,6 +127,7 @@ def test_a_corrupt_entry_is_ignored_with_a_warning_and_replaced(store):
     _program_cache.call(_toy, x, 1.5, 3)
     (name,) = _entries(store)
     (store / name).write_bytes(b"not a program")
+    _program_cache._loaded.clear()  # as in a new process
     with pytest.warns(RuntimeWarning, match="unreadable program cache entry"):
         out = _program_cache.call(_toy, x, 1.5, 3)
     np.testing.assert_array_equal(np.asarray(out["y"]), np.asarray(_toy(x, 1.5, 3)["y"]))
@@ -142,7 +165,9 @@ t_end = float(sys.argv[3])
 run = lambda: simulate(mechanism, initial, t_end, control=scene.default_control, n_save=21)
 runs = [run()]
 _program_cache.enable(sys.argv[1])
-runs += [run(), run()]
+runs.append(run())
+_program_cache._loaded.clear()  # the third reads the entry back from the disk
+runs.append(run())
 for name in ("ts", "q", "v", "qdd", "lam"):
     a, b, c = (np.asarray(getattr(r, name)) for r in runs)
     assert a.tobytes() == b.tobytes() == c.tobytes(), name
