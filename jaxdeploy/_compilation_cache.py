@@ -63,4 +63,9 @@ def enable_compilation_cache() -> str | None:
     except OSError:
         return None
     jax.config.update("jax_compilation_cache_dir", folder)
+    # JAX stores only programs that took ≥ 1 s to compile (its default); a warm run would
+    # compile the small ones again each time (the scene build's array operations, the
+    # contact histories: ~20 programs, about a second). Unless the user chose a threshold.
+    if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     return folder
