@@ -42,9 +42,11 @@ def _control_and_options(scene, control, simulate_options) -> tuple[StepControl,
 
 
 def vmapped_control(control: StepControl) -> StepControl:
-    """The step control a vmapped batch runs with: `control`, except that generalized-α given
-    by name (the default solver) runs Newton's method proper, `GeneralizedAlpha(newton="full")`,
-    rather than the modified Newton of a single run. A solver object is used as given.
+    """The step control a vmapped batch runs with: `control`, except that generalized-α chosen
+    by name (the default solver, or an automatic choice that resolves to it at this tolerance,
+    e.g. slider_crank's `"auto:generalized_alpha"`) runs Newton's method proper,
+    `GeneralizedAlpha(newton="full")`, rather than the modified Newton of a single run. A
+    solver object is used as given.
 
     Why. Modified Newton keeps the factorised iteration matrix across steps and forms it again
     only when a case's iteration slows: a single slider_crank run re-forms it in fewer than one
@@ -58,7 +60,7 @@ def vmapped_control(control: StepControl) -> StepControl:
     same equations to the same Newton tolerance, so a case differs from its single run by far
     less than the step's error (tests/test_batch.py).
     """
-    if control.solver == "generalized_alpha":
+    if control.resolved_solver() == "generalized_alpha":
         return control.replace(solver=GeneralizedAlpha(newton="full"))
     return control
 

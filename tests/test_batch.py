@@ -104,6 +104,14 @@ def test_vmapped_batches_run_generalized_alpha_with_newtons_method_proper():
     given = StepControl(GeneralizedAlpha(rho_inf=0.5), dt=1e-3)
     assert vmapped_control(given) is given
     assert vmapped_control(StepControl("tsit5", rtol=1e-6)).solver == "tsit5"
+    # An automatic choice that resolves to generalized-α (slider_crank's default) too; one
+    # that resolves to a Runge-Kutta method at a tight tolerance is left alone.
+    from jaxdeploy.scenes import SliderCrank
+
+    default = SliderCrank.default_control
+    assert vmapped_control(default).solver == GeneralizedAlpha(newton="full")
+    tight = default.replace(rtol=1e-12, atol=1e-15)
+    assert vmapped_control(tight) is tight
 
 
 @pytest.mark.slow  # ~2 min under load (two compilations of slider_crank)
