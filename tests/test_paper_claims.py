@@ -22,6 +22,11 @@ def test_comparisons_within_the_error_bars_are_unresolved():
     assert pc.verdict_from(["agrees", "disagrees"]) == "partly"
     assert pc.verdict_from(["not resolved", "not resolved"]) == "not resolved"
     assert _evidence([float("nan"), 1.0], [0, 0]).compare("m", 0, "m", 1) == "?"
+    # "Similar": a ratio of values within their error bars compares noise.
+    assert pc.spread_verdict(_evidence([1.0, 1.5], [0.1, 0.1]), "m", [0, 1], 2.0)[1] == "agrees"
+    assert pc.spread_verdict(_evidence([1.0, 3.0], [0.1, 0.1]), "m", [0, 1], 2.0)[1] == "disagrees"
+    noise = _evidence([1e-16, 3e-16], [1e-15, 1e-15])
+    assert pc.spread_verdict(noise, "m", [0, 1], 2.0)[1] == "not resolved"
 
 
 def test_spectral_peak_of_a_tone():

@@ -173,9 +173,13 @@ def comparison_verdict(comparison, expected):
 
 
 def spread_verdict(ev, metric, cases, limit):
-    """'Similar across cases': max/min ratio of the values below `limit`."""
+    """'Similar across cases': max/min ratio of the values below `limit`; 'not resolved' when
+    a value does not exceed its uncertainty (the ratio would compare numerical noise, e.g.
+    vibration that has decayed to round-off)."""
     vals = np.array([ev.value(metric, i) for i in cases])
     ratio = vals.max() / vals.min()
+    if any(abs(v) <= ev.uncertainty(metric, i) for v, i in zip(vals, cases, strict=True)):
+        return ratio, "not resolved"
     return ratio, ("agrees" if ratio < limit else "disagrees")
 
 
