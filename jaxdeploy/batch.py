@@ -44,7 +44,7 @@ def _control_and_options(scene, control, simulate_options) -> tuple[StepControl,
 def vmapped_control(control: StepControl) -> StepControl:
     """The step control a vmapped batch runs with: `control`, except that generalized-α chosen
     by name (the default solver, or an automatic choice that resolves to it at this tolerance,
-    e.g. slider_crank's `"auto:generalized_alpha"`) runs Newton's method proper,
+    e.g. `"auto:generalized_alpha"`) runs Newton's method proper,
     `GeneralizedAlpha(newton="full")`, rather than the modified Newton of a single run. A
     solver object is used as given.
 

@@ -104,13 +104,15 @@ def test_vmapped_batches_run_generalized_alpha_with_newtons_method_proper():
     given = StepControl(GeneralizedAlpha(rho_inf=0.5), dt=1e-3)
     assert vmapped_control(given) is given
     assert vmapped_control(StepControl("tsit5", rtol=1e-6)).solver == "tsit5"
-    # An automatic choice that resolves to generalized-α (slider_crank's default) too; one
-    # that resolves to a Runge-Kutta method at a tight tolerance is left alone.
+    # An automatic choice that resolves to generalized-α too; one that resolves to a
+    # Runge-Kutta method (slider_crank's default, or a tight tolerance) is left alone.
     from jaxdeploy.scenes import SliderCrank
 
+    loose = StepControl("auto:generalized_alpha", rtol=1e-6, atol=1e-9)
+    assert vmapped_control(loose).solver == GeneralizedAlpha(newton="full")
     default = SliderCrank.default_control
-    assert vmapped_control(default).solver == GeneralizedAlpha(newton="full")
-    tight = default.replace(rtol=1e-12, atol=1e-15)
+    assert vmapped_control(default) is default
+    tight = loose.replace(rtol=1e-12, atol=1e-15)
     assert vmapped_control(tight) is tight
 
 
@@ -127,12 +129,15 @@ def test_slider_crank_batch_is_as_accurate_as_its_cases_run_one_at_a_time():
     scene = SliderCrank()
     t_end = 1.5e-3
     cases = {"restitution": [0.8, 0.9, 0.99]}
-    batch = simulate_batch(scene, cases, t_end, n_save=31)
+    # generalized-α chosen by name (no longer the scene's default), so the batch runs Newton
+    # proper (`vmapped_control`) where the single runs keep modified Newton.
+    control = scene.default_control.replace(solver="generalized_alpha")
+    batch = simulate_batch(scene, cases, t_end, n_save=31, control=control)
     assert list(batch.ok) == [True] * 3
-    tight = scene.default_control.replace(rtol=1e-9, atol=1e-12)
+    tight = control.replace(rtol=1e-9, atol=1e-12)
     for i in range(3):
         params = batch.case_params(i)
-        single = run_scene(scene, params, t_end, n_save=31)
+        single = run_scene(scene, params, t_end, n_save=31, control=control)
         reference = run_scene(scene, params, t_end, n_save=31, control=tight)
         err_single = float(np.max(np.abs(single.q - reference.q)))
         err_batch = float(np.max(np.abs(batch.case(i).q - reference.q)))

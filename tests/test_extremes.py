@@ -129,7 +129,10 @@ def test_saved_accelerations_of_long_explicit_steps_are_the_mechanism_s():
 def test_slider_crank_summary_does_not_depend_on_the_save_grid():
     """Through the first impacts (the journal starts centred and meets the bearing at
     ~1 ms): the summary's extremes from 21 and from 2001 saved states are the same run's, to
-    the last bit, and bound the fine grid's maximum force closely from above."""
+    the last bit, and agree with the fine grid's maximum force within issue 19's 0.5 %.
+    (Tracked at each step's end and midpoint, they need not bound a finer sampling of the
+    dense output from above: with Tsit5, the scene's default, the 1.25 µs grid sees a peak
+    0.2 % above them.)"""
     scene = SliderCrank()
     params = scene.resolve_params()
     mech = scene.build(params)
@@ -140,8 +143,8 @@ def test_slider_crank_summary_does_not_depend_on_the_save_grid():
     assert summaries[21]["max_contact_force"] > 100.0  # there was an impact
     (history,) = clearance_joint_history(mech, runs[2001]).values()
     grid = float(np.max(history["normal_force"]))
-    # The tracked value bounds the fine grid's from above, closely: the peaks are resolved.
-    assert grid <= summaries[21]["max_contact_force"] < 1.01 * grid
+    # The peaks are resolved: the tracked value is the fine grid's to 0.5 %.
+    assert abs(summaries[21]["max_contact_force"] - grid) <= 5e-3 * grid
 
 
 @pytest.mark.slow  # two full deploy_array runs (2 s)
