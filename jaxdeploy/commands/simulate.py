@@ -27,7 +27,7 @@ DEFAULT_SCENE = "deploy_array"
 # Wall time of the integration per simulated second with each scene's default step control
 # [s/s]: `phases.integrate_s` / `t_end_s` of `jaxdeploy simulate SCENE` (default parameters)
 # on the 2-core reference machine while it was shared (load average ~9, so these are upper
-# values; docs/default_run.md has deploy_array at 0.8 s/s on a quieter core). Only the order
+# values; docs/performance.md times the whole command quietly). Only the order
 # of magnitude matters: it sizes the estimate that stops a run of hours started by a
 # mistyped --t-end.
 INTEGRATE_S_PER_SIMULATED_S = {

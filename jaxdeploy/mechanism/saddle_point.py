@@ -15,8 +15,9 @@ m × n constraint Jacobian of full row rank. Two ways, same solution in exact ar
   2nd ed., 2006, §16.2), factorised by Cholesky. `S` is m × m instead of (n + m)², needs no
   pivoting, and the elimination with a diagonal `M` is an elementwise scaling. On XLA's CPU
   backend, where a mechanism's step is many small operations, the batched LU of (1) gains
-  almost nothing from vectorisation while this does (parts table of
-  docs/batch_throughput.md). Conditioning: κ(S) ≤ κ(J)² · max(M)/min(M).
+  less from vectorisation than these elementwise operations and one small Cholesky
+  (`make bench` measures the step's linear-algebra ceiling: docs/performance.md).
+  Conditioning: κ(S) ≤ κ(J)² · max(M)/min(M).
 * **LU of (1)** (`kkt_lu_solution`, partial pivoting). A coordinate that the constraints
   alone fix (a slider's lateral position) gets its acceleration from its constraint row, so
   it comes out exactly as that row says (0), where the range space gets it as the difference
