@@ -130,7 +130,13 @@ def rerun(name: str, report: dict) -> dict:
 
     scene = get_scene("slider_crank", **report["scene_options"])
     data = load_measurements(report["data"])
-    control = report["step_control"]
+    # The recorded step control, as settings: `solver` is the method that ran; where a rule
+    # chose it (`solver_rule`), the scene's default rule chooses again at 10x tighter.
+    control = {
+        k: v for k, v in report["step_control"].items() if k not in ("adaptive", "solver_rule")
+    }
+    if report["step_control"].get("solver_rule"):
+        control.pop("solver")
     out = {"params": report["params"]}
     for key, factor in (("at_fit_rtol", 1.0), ("at_tenth_rtol", 0.1)):
         ctl = {**control, "rtol": control["rtol"] * factor, "atol": control["atol"] * factor}

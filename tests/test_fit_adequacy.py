@@ -179,6 +179,7 @@ def test_a_fit_not_reproducible_is_refitted_at_tighter_tolerances_until_it_is():
     assert [r["reproducible"] for r in records] == [False] * (len(records) - 1) + [True]
     assert refitted.tolerance["rtol"] == pytest.approx(control.rtol)
     assert len(refitted.stages) == len(result.stages) + len(records)
+    assert refitted.report()["initial_guess"] == {"length": 0.82}
     est, se = refitted.estimates["length"], refitted.standard_errors["length"]
     assert abs(est - truth["length"]) < 3 * se
     assert abs(result.estimates["length"] - truth["length"]) > 3 * se

@@ -743,10 +743,10 @@ def refit_until_reproducible(
 
     `result` must have been checked (`tolerance_check`). **Returns:** `(result, control,
     stages)`: the last refit (its `stages` and `history` continue the first fit's, its
-    `iterations`, `evaluations` and `wall_time` add up; `model_initial` stays the first
-    fit's start), its step control, and one record per refit (rtol, estimates, standard
-    errors, χ²/dof, the check, trial steps, wall time). `on_stage(record)` is called after
-    each."""
+    `iterations`, `evaluations` and `wall_time` add up; `model_initial` and the parameters'
+    guesses stay the first fit's), its step control, and one record per refit (rtol,
+    estimates, standard errors, χ²/dof, the check, trial steps, wall time). `on_stage(record)`
+    is called after each."""
     import dataclasses
 
     from ..batch import step_control
@@ -796,6 +796,7 @@ def refit_until_reproducible(
         stages = [dict(st, refit_rtol=control.rtol) for st in refit.stages]
         result = dataclasses.replace(
             refit,
+            parameters=result.parameters,  # the user's guesses (the refit started elsewhere)
             stages=[*result.stages, *stages],
             history=[*result.history, *refit.history],
             iterations=result.iterations + refit.iterations,
