@@ -366,6 +366,7 @@ def run(args) -> int:
         # tight enough: refit from the estimate at 10x tighter until the check passes.
         if not args.quiet:
             print(_tolerance_line(result.tolerance), file=sys.stderr)
+        schedule["tolerance_check_before_refits"] = result.tolerance
 
         def announce(record):
             if not args.quiet:

@@ -10,8 +10,8 @@ from those at rtol_(k+1) by at most `MODEL_ERROR` noise levels RMS over the fitt
 (the tighter run is ~10x more accurate, so the difference estimates the looser run's error;
 Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.4). A model error of 0.2 σ RMS adds 0.04 to
 χ²/dof. rtol_0 is the smaller of the scene's default and 1e-2 σ/RMS(y), never below
-`RTOL_FLOOR`: below it the error estimate of a float64 run is round-off (slider_crank at
-rtol 1e-11 stalls at 6 ms with 2e6 steps). After the fit `tolerance_check` repeats the
+`RTOL_FLOOR` (the search's cost grows ~2x per decade; the check after the fit goes further,
+`refit_until_reproducible`). After the fit `tolerance_check` repeats the
 comparison at the estimate and computes the Gauss–Newton step a refit at the tighter
 tolerance would take, in standard errors; where it fails, the command refits from the
 estimate at 10x tighter tolerances until it passes (`refit_until_reproducible`): the start
