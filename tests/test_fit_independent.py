@@ -21,11 +21,17 @@ TRUTH = {"clearance": 0.5e-3, "restitution": 0.9, "friction_coefficient": 0.01}
 WITHIN = {"clearance": 0.01, "restitution": 0.03}
 
 
-def _readme_command():
-    """The fit command of the README's worked example, as written there."""
+def _readme_command(out):
+    """The fit command of the README's worked example, as written there, writing to `out`
+    (the README leaves the folder to the default, results/fit/SCENE-DATE-TIME)."""
     text = (ROOT / "README.md").read_text()
     line = next(x for x in text.splitlines() if x.startswith("jaxdeploy fit examples/"))
-    return shlex.split(line)[1:]
+    argv = shlex.split(line)[1:]
+    if "--out" in argv:
+        argv[argv.index("--out") + 1] = str(out)
+    else:
+        argv += ["--out", str(out)]
+    return argv
 
 
 @pytest.mark.slow
@@ -33,10 +39,8 @@ def test_readme_example_recovers_the_reference_parameters(tmp_path, monkeypatch)
     """Clearance within 1 %, c_e within 3 %, the truth inside 3 reported standard errors, the
     fit adequate (exit 0)."""
     monkeypatch.chdir(ROOT)
-    argv = _readme_command()
     out = tmp_path / "fit"
-    argv[argv.index("--out") + 1] = str(out)
-    _assert_recovered(main(argv), out)
+    _assert_recovered(main(_readme_command(out)), out)
 
 
 def _assert_recovered(status, out, allowed=(0,)):
@@ -84,9 +88,8 @@ def test_twelve_milliseconds_with_friction_fits_mu_too(tmp_path, monkeypatch):
 def test_the_wrong_impact_velocity_rule_is_flagged_inadequate(tmp_path, monkeypatch):
     """The same data fitted with the running-max rule (not the rule that made them): exit 3."""
     monkeypatch.chdir(ROOT)
-    argv = _readme_command()
     out = tmp_path / "wrong"
-    argv[argv.index("--out") + 1] = str(out)
+    argv = _readme_command(out)
     argv += ["--scene-option", "impact_velocity_rule=running_max", "--quiet"]
     assert main(argv) == 3
     report = json.loads((out / "fit.json").read_text())
