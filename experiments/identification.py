@@ -143,19 +143,26 @@ def table(report, truth, title, tolerance=None, name=""):
     ]
     for n in names:
         est, se = report["estimates"][n], report["standard_errors"][n]
+        se = float("inf") if se is None else se  # strict JSON writes an infinite s.e. as null
         z = (est - truth[n]) / se if np.isfinite(se) and se > 0 else float("nan")
         lines.append(
             f"| `{n}` | {truth[n]:.4g} | {report['initial_guess'][n]:.4g} | {est:.6g} | "
             f"{se:.2g} ({se / abs(est):.2%}) | {z:+.2f} |"
         )
     corr = report["correlation"]
-    pairs = [f"{a}–{b} {corr[a][b]:+.3f}" for i, a in enumerate(names) for b in names[i + 1 :]]
+    pairs = [
+        f"{a}–{b} " + ("undefined" if corr[a][b] is None else f"{corr[a][b]:+.3f}")  # null: NaN
+        for i, a in enumerate(names)
+        for b in names[i + 1 :]
+    ]
     lines += ["", "Correlations: " + "; ".join(pairs) + "."]
     lines.append(
         "Report flags: "
         + ("; ".join(report["flags"]) if report["flags"] else "none")
         + ". Singular values of the relative Jacobian: "
-        + ", ".join(f"{s:.3g}" for s in report["singular_values_relative_jacobian"])
+        + ", ".join(
+            "–" if s is None else f"{s:.3g}" for s in report["singular_values_relative_jacobian"]
+        )
         + "."
     )
     if tolerance is not None:
