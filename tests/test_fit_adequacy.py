@@ -183,3 +183,29 @@ def test_a_fit_not_reproducible_is_refitted_at_tighter_tolerances_until_it_is():
     est, se = refitted.estimates["length"], refitted.standard_errors["length"]
     assert abs(est - truth["length"]) < 3 * se
     assert abs(result.estimates["length"] - truth["length"]) > 3 * se
+
+
+def test_a_capped_continuation_stage_does_not_make_the_fit_unconverged(tmp_path):
+    """`converged` is the last stage's: an earlier (smoothed) stage stopped by its iteration
+    cap only seeds the next one, so it is no verdict on the estimate. Here the first stage is
+    cut to one trial step (by the optimiser argument); the pointwise stage then converges, and
+    the fit says so (exit 0 of the command, not 4)."""
+    from jaxdeploy.fit import ResidualSpec, levenberg_marquardt, load_measurements
+
+    path, _ = _pendulum_data(tmp_path, lambda t: 0.0 * t)
+    calls = []
+
+    def capped_first_stage(model, z, **options):
+        calls.append(len(calls))
+        if len(calls) == 1:
+            options["max_iterations"] = 1
+        return levenberg_marquardt(model, z, **options)
+
+    result = fit(Pendulum(), load_measurements(str(path)), ["length=1.0:0.1:5"],
+                 fixed={"initial_angle": -0.6},
+                 residuals=[ResidualSpec("smooth", width=0.05), ResidualSpec()],
+                 optimiser=capped_first_stage)  # fmt: skip
+    assert len(calls) == 2
+    assert not result.stages[0]["converged"] and result.stages[1]["converged"]
+    assert result.converged
+    assert abs(result.estimates["length"] - 0.8) < 3 * result.standard_errors["length"]

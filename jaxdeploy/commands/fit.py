@@ -10,8 +10,8 @@ Exit status (docs/identification.md):
 * 2 — refused input (bad data file, parameter, option or output folder);
 * 3 — the model does NOT explain the data (χ²/dof far above 1 or residuals not white): the
   estimates and their standard errors are not to be trusted, whether or not it converged;
-* 4 — the model explains the data but the optimiser stopped before its criterion was met
-  (e.g. --max-iterations reached): the estimates may still move;
+* 4 — the model explains the data but the optimiser stopped before its criterion was met in
+  the last stage (e.g. --max-iterations reached): the estimates may still move;
 * 5 — the model explains the data but is not reproducible at the noise level at the estimate
   (the tolerance check: a 10x tighter model tolerance changes it by more than one noise level
   RMS or would move an estimate by more than one standard error): the fit may have matched

@@ -652,7 +652,9 @@ def fit(
         noise_known=comparison.noise_known,
         iterations=sum(st["iterations"] for st in stages),
         evaluations=evaluations,
-        converged=all(st["converged"] for st in stages),
+        # The last stage decides: the earlier ones are continuation (smoothed channels, shorter
+        # horizons) whose end only seeds the next, so a capped one is no verdict on the result.
+        converged=stages[-1]["converged"],
         message=stages[-1]["message"],
         history=history,
         wall_time=time.perf_counter() - start,
