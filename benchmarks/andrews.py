@@ -24,12 +24,11 @@ from __future__ import annotations
 import math
 import os
 import sys
-import time
 from dataclasses import asdict
 
 import numpy as np
 
-from .work_precision import TIMING_BUDGET_S, Config, Row
+from .work_precision import Config, Row, timed_calls
 
 HORIZON_S = 0.03
 
@@ -99,24 +98,14 @@ def measure(quick: bool = False, repeats: int = 3, log=print, root: str = ".") -
     reference = np.asarray(TEST_SET_SOLUTION["q"])
     rows, compiled = [], {}
     for number, cfg in enumerate(configurations(quick), 1):
-        run = _runner(cfg)
-        start = time.perf_counter()
-        try:
-            angles, steps, status = run()
-        except Exception as err:  # a failed configuration is a row, not a lost benchmark
-            angles, steps, status = np.full(7, np.nan), -1, f"failed: {err}"
-        first = time.perf_counter() - start
-        walls = []
-        while status == "ok" and len(walls) < repeats and sum(walls) < TIMING_BUDGET_S:
-            start = time.perf_counter()
-            run()
-            walls.append(time.perf_counter() - start)
-        warm = float(np.median(walls)) if walls else math.nan
+        (angles, steps, status), first, warm = timed_calls(
+            _runner(cfg), np.full(7, np.nan), repeats
+        )
         compile_s = math.nan
         if cfg.kind == "jaxdeploy":
             # Tolerances are data of the compiled program: a family compiles once.
             if cfg.solver not in compiled:
-                compiled[cfg.solver] = first - warm if walls else math.nan
+                compiled[cfg.solver] = max(first - warm, 0.0)
             compile_s = compiled[cfg.solver]
             first = compile_s + warm
         error = float(np.max(np.abs(np.asarray(angles) - reference) / np.abs(reference)))

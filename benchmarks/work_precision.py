@@ -172,6 +172,25 @@ def _call(cfg: Config, ours, ts):
     return run
 
 
+def timed_calls(run, failed_output, repeats: int):
+    """`((output, steps, status), first, warm)` of a configuration's callable `run`: the first
+    call's wall time, then the median of up to `repeats` further calls (fewer once they add up
+    to `TIMING_BUDGET_S`; NaN when the first call did not end "ok"). A call that raises is a
+    row with `failed_output`, not a lost benchmark."""
+    start = time.perf_counter()
+    try:
+        result = run()
+    except Exception as err:
+        result = (failed_output, -1, f"failed: {err}")
+    first = time.perf_counter() - start
+    walls = []
+    while result[2] == "ok" and len(walls) < repeats and sum(walls) < TIMING_BUDGET_S:
+        start = time.perf_counter()
+        run()
+        walls.append(time.perf_counter() - start)
+    return result, first, float(np.median(walls)) if walls else math.nan
+
+
 def measure(quick: bool = False, repeats: int = 3, log=print, root: str = ".") -> dict:
     """Every configuration's row (module docstring) and what was measured."""
     from .exudyn_peer import exudyn_available, exudyn_version
@@ -182,19 +201,9 @@ def measure(quick: bool = False, repeats: int = 3, log=print, root: str = ".") -
     rows, compiled = [], {}
     todo = configurations(quick, exudyn)
     for number, cfg in enumerate(todo, 1):
-        run = _call(cfg, ours, ts)
-        start = time.perf_counter()
-        try:
-            x, steps, status = run()
-        except Exception as err:  # a failed configuration is a row, not a lost benchmark
-            x, steps, status = np.full(ts.size, np.nan), -1, f"failed: {err}"
-        first = time.perf_counter() - start
-        walls = []
-        while status == "ok" and len(walls) < repeats and sum(walls) < TIMING_BUDGET_S:
-            start = time.perf_counter()
-            run()
-            walls.append(time.perf_counter() - start)
-        warm = float(np.median(walls)) if walls else math.nan
+        (x, steps, status), first, warm = timed_calls(
+            _call(cfg, ours, ts), np.full(ts.size, np.nan), repeats
+        )
         compile_s = math.nan
         if cfg.kind == "jaxdeploy":
             key = (cfg.solver, cfg.dt is None)
