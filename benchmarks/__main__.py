@@ -5,6 +5,8 @@
   `DIR/bench/targets.json` (DIR: `docs`, or `results/bench_quick` with `--quick`).
 * `part NAME --json FILE [--quick]`: one measurement (work-precision, andrews, batch, ceiling,
   gradient, simulate) into FILE; used by `all`.
+* `tour [--allow-dirty]`: the README tour's commands timed, its `Time:` lines rewritten
+  (`benchmarks/tour.py`); `all` runs it last when it writes to `docs`.
 """
 
 from __future__ import annotations
@@ -104,7 +106,12 @@ def _all(args) -> int:
     atomic_write_bytes(os.path.join(out, "performance.md"), text.encode("utf-8"))
     print(f"wrote {out}/performance.md in {record['wall_s']:.0f} s "
           f"(load {record['load_start_1min']:.1f} → {record['load_end_1min']:.1f})")  # fmt: skip
-    return 0
+    if args.quick or os.path.abspath(out) != os.path.abspath("docs"):
+        return 0
+    print("README tour ...", flush=True)
+    from . import tour
+
+    return tour.main("README.md", allow_dirty=args.allow_dirty)
 
 
 def main(argv=None) -> int:
@@ -115,6 +122,9 @@ def main(argv=None) -> int:
     every.add_argument("--out", default=None, help="folder of the page (default docs)")
     every.add_argument("--allow-dirty", action="store_true",
                        help="measure uncommitted code (the page is marked dirty)")  # fmt: skip
+    walk = sub.add_parser("tour", help="time the README's tour, rewrite its Time: lines")
+    walk.add_argument("--allow-dirty", action="store_true",
+                      help="measure uncommitted code (the README is marked dirty)")  # fmt: skip
     one = sub.add_parser("part", help="one measurement into a JSON file")
     one.add_argument("name", choices=PARTS)
     one.add_argument("--json", required=True)
@@ -122,6 +132,10 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.command == "all":
         return _all(args)
+    if args.command == "tour":
+        from . import tour
+
+        return tour.main("README.md", allow_dirty=args.allow_dirty)
     from jaxdeploy.io import atomic_write_json
 
     atomic_write_json(args.json, _part(args.name, args.quick))

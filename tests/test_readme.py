@@ -1,7 +1,8 @@
 """Every command of the README runs as written (issue 22 item 7), so the README cannot rot.
 
-The README's ```bash blocks are parsed line by line (a trailing backslash continues a line;
-bash itself drops the comments) and run with bash in a fresh folder that holds only a link to
+The README's ```bash blocks are parsed line by line (`benchmarks.tour.sections`, which times
+the same tour for `make bench`: a trailing backslash continues a line, bash itself drops the
+comments) and run with bash in a fresh folder that holds only a link to
 `examples/`, with this checkout's code first on the Python path and the environment's `bin`
 first on PATH (what `source .venv/bin/activate` does, so that line is not run). `make demo` is
 run as its Makefile recipe (the venv is the one running the tests); `make test` is not run:
@@ -22,6 +23,8 @@ import sys
 
 import pytest
 
+from benchmarks.tour import sections
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 README = os.path.join(ROOT, "README.md")
 BIN = os.path.dirname(sys.executable)
@@ -33,32 +36,7 @@ NOT_RUN = {
 
 def _sections():
     """`[(section title, [blocks])]`, each block `(language, [commands], text after it)`."""
-    text = open(README, encoding="utf-8").read()
-    sections, title = [], ""
-    parts = re.split(r"^(##+ .*)$", text, flags=re.M)
-    for part in parts:
-        if part.startswith("##"):
-            title = part.lstrip("#").strip()
-            continue
-        blocks = []
-        for match in re.finditer(r"```(\w+)\n(.*?)```(.*?)(?=```|\Z)", part, flags=re.S):
-            language, body, after = match.groups()
-            blocks.append((language, _commands(body) if language == "bash" else [body], after))
-        sections.append((title, blocks))
-    return sections
-
-
-def _commands(body: str) -> list[str]:
-    commands, current = [], ""
-    for line in body.splitlines():
-        current += line.rstrip()
-        if current.endswith("\\"):
-            current = current[:-1] + " "
-            continue
-        if current.strip() and not current.lstrip().startswith("#"):
-            commands.append(current.strip())
-        current = ""
-    return commands
+    return sections(open(README, encoding="utf-8").read())
 
 
 def _words(command: str) -> list[str]:
