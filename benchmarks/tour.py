@@ -143,7 +143,8 @@ def time_line(block: dict) -> str:
         text = f"{_seconds(c['wall_s'])} wall, {_seconds(c['cpu_s'])} CPU"
         if c["phases"]:
             text += " (phases: " + ", ".join(
-                f"{name} {_seconds(float(s))}" for name, s in c["phases"].items()
+                f"{name.removesuffix('_s')} {_seconds(float(s))}"
+                for name, s in c["phases"].items()
                 if isinstance(s, int | float)
             ) + ")"  # fmt: skip
         if len(block["commands"]) > 1:
