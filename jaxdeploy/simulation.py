@@ -43,6 +43,7 @@ class Trajectory(eqx.Module):
     """Saved states and run statistics.
 
     `ts` (N,), `q`, `v`, `qdd` (N, n), `lam` (N, m), `memory` (pytree, leading axis N);
+    `qdd` and `lam` are None for `simulate(..., accelerations=False)`;
     `result` (a diffrax RESULTS code), `stats` (steps, accepted, rejected, Newton iterations);
     `step_times`: with `simulate(..., replay_steps=...)`, the ends of the steps taken (padded
     with +inf; pass them as `replay_steps` to integrate other parameters over the same steps),
@@ -228,9 +229,22 @@ def _save_times(t0, t_end, n_save, ts):
     return jnp.linspace(t0, t_end, n_save)
 
 
+def _without_accelerations(t, y, args):
+    """A saved state without its q̈ and λ (`simulate(..., accelerations=False)`): the dense
+    output's acceleration solve is then unused and XLA compiles it out."""
+    return y._replace(qdd=None, lam=None)
+
+
 @eqx.filter_jit
-def _solve(mechanism, y0, t0, t_end, dt0, ts, solver, controller, max_steps, progress, adjoint):
+def _solve(
+    mechanism, y0, t0, t_end, dt0, ts, solver, controller, max_steps, progress, adjoint,
+    accelerations=True,
+):  # fmt: skip
     meter = dfx.TqdmProgressMeter() if progress else dfx.NoProgressMeter()
+    # Saved states as the dense output gives them (diffrax's default), or without q̈ and λ.
+    states = (
+        dfx.SubSaveAt(ts=ts) if accelerations else dfx.SubSaveAt(ts=ts, fn=_without_accelerations)
+    )
     return integrate(
         mechanism,
         y0,
@@ -242,7 +256,7 @@ def _solve(mechanism, y0, t0, t_end, dt0, ts, solver, controller, max_steps, pro
         max_steps,
         # The second output is the time the run reached (t_end unless it failed).
         saveat=dfx.SaveAt(
-            subs=[dfx.SubSaveAt(ts=ts), dfx.SubSaveAt(t1=True, fn=lambda t, y, args: None)],
+            subs=[states, dfx.SubSaveAt(t1=True, fn=lambda t, y, args: None)],
             solver_state=True,
         ),
         progress_meter=meter,
@@ -272,6 +286,7 @@ def simulate(
     replay_steps=False,
     locate_events=True,
     extreme_samples: int = 1,
+    accelerations: bool = True,
 ) -> Trajectory:
     """Integrate `mechanism` from `initial` (a `consistent_state`) to `t_end`.
 
@@ -315,10 +330,18 @@ def simulate(
     - `extreme_samples`: interior points of every step, besides its end, at which the run's
       extremes (`Trajectory.extremes`) are evaluated on the dense output (default 1, the
       midpoint; `jaxdeploy.solvers.TrackExtremes`).
+    - `accelerations`: evaluate the saved q̈ and λ (default). Each saved time's q̈ and λ are
+      an acceleration solve at the interpolated state (`jaxdeploy.solvers.term.
+      accelerations_at`); with `False` they are not evaluated (`Trajectory.qdd` and `.lam`
+      are None) and everything else is bit for bit the same. Saving many times of a short run
+      is then much cheaper: slider_crank's 4001 saved times over 4 ms were about a third of a
+      Tsit5 run's cost (`benchmarks/work_precision.py`).
 
     **Returns:** a `Trajectory`; check `.ok` / `.status()`: a failed solve keeps the states it
     finished and says when and why it stopped.
     """
+    if not isinstance(accelerations, bool):
+        raise TypeError(f"accelerations = {accelerations!r} is invalid: it must be True or False")
     run = prepare(
         mechanism,
         initial,
@@ -356,6 +379,7 @@ def simulate(
         run.max_steps,
         progress,
         run.adjoint,
+        accelerations,
     )
     (ts, end), (ys, _) = sol.ts, sol.ys
     return Trajectory.from_states(
