@@ -16,7 +16,8 @@ Sides:
   numpy only), `solve_ivp` with DOP853, Radau and LSODA at atol = rtol.
 
 Timing as in `benchmarks.work_precision` (one process pinned to one core; compile = a family's
-first call minus its warm call; first call = compile + warm; warm = median of repeats).
+first call minus its warm call; first call = compile + warm; warm = the fastest warm call,
+`work_precision.timed_calls`).
 """
 
 from __future__ import annotations

@@ -10,7 +10,12 @@ import pytest
 
 from benchmarks import page, provenance
 from benchmarks.scipy_peer import SliderCrankPeer
-from benchmarks.work_precision import best_at_levels, configurations, load_reference
+from benchmarks.work_precision import (
+    best_at_levels,
+    configurations,
+    load_reference,
+    timed_calls,
+)
 
 
 def test_scipy_peer_converges_to_the_independent_reference():
@@ -62,6 +67,50 @@ def test_best_at_levels_and_target_ratios():
     assert page._verdict(0.4, 0.5) == "met"
     assert page._verdict(1.0, 0.5) == "missed: 2× the goal"
     assert page._verdict(1.5, 3.0, smaller_is_better=False) == "missed: 2× short"
+
+
+def test_timed_calls_takes_the_fastest_of_enough_warm_calls():
+    """Warm is the fastest of at least `repeats` calls, more while they are short; the stats
+    say how many and their median; a run that raises is a failed row without warm calls."""
+    calls = []
+
+    def run():
+        calls.append(1)
+        return "out", 3, "ok"
+
+    stats = {}
+    (out, steps, status), first, warm = timed_calls(run, None, 3, stats)
+    assert (out, steps, status) == ("out", 3, "ok") and first >= 0
+    assert stats["warm_calls"] == len(calls) - 1 > 3  # short calls: repeated past `repeats`
+    assert 0 <= warm <= stats["warm_median_s"] and stats["warm_cpu_s"] >= 0
+
+    def broken():
+        raise RuntimeError("boom")
+
+    stats = {}
+    (out, steps, status), _, warm = timed_calls(broken, "nan", 3, stats)
+    assert (out, steps) == ("nan", -1) and status == "failed: boom"
+    assert math.isnan(warm) and stats["warm_calls"] == 0
+
+
+def test_cached_first_call_is_its_own_row_and_not_the_verdict():
+    rows = [
+        dict(_row("jaxdeploy", 1e-6, 0.02, 9.0), first_cached_s=0.3),
+        _row("jaxdeploy", 1e-9, 0.05, 8.0),  # a family without a cached measurement
+        _row("scipy", 1e-7, 0.04, 0.05),
+    ]
+    levels = {e["level_m"]: e for e in page.work_precision_targets(rows)}
+    assert levels[1e-6]["ratio_first_s"] == pytest.approx(8.0 / 0.05)
+    assert levels[1e-6]["ratio_first_cached_s"] == pytest.approx(0.3 / 0.05)
+    assert math.isnan(levels[1e-8]["ratio_first_cached_s"])  # no cached row reaches 1e-8
+    wp = {"rows": rows, "error_measure": "e", "reference": "r", "exudyn": None, "repeats": 3,
+          "warm_statistic": "fastest of 3", "new_process": {}}  # fmt: skip
+    record = provenance.finish(provenance.start(["benchmarks"], allow_dirty=True))
+    record["wall_s"] = 1.0
+    text = page.render(record, wp, {}, command="make bench", cut=[])
+    assert "| work–precision first call (compile included), error ≤ 1e-06 m | 160.00" in text
+    assert "persistent caches filled (not the target), error ≤ 1e-06 m | 6.00" in text
+    assert "Warm: the fastest of 3" in text
 
 
 def test_provenance_round_trips_through_the_page_header():
