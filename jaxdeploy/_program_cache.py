@@ -49,11 +49,14 @@ import pickle
 import platform
 import sys
 import tempfile
+import threading
 import warnings
+from contextlib import contextmanager
 
 _folder: str | None = None
 _unexportable: set[str] = set()
 _loaded: dict[str, tuple] = {}
+_hook = threading.local()
 
 # JAX settings that change what a function traces to (dtypes, precision, promotion rules).
 _TRACE_SETTINGS = (
@@ -79,6 +82,28 @@ def enable(folder: str | None) -> None:
 
 def folder() -> str | None:
     return _folder
+
+
+@contextmanager
+def when_traced(callback):
+    """Within this block, `callback()` is called once, in this thread, when the first call
+    through the store has its program (traced and exported, or read back) and is about to
+    compile and run it: from then on the thread mostly waits on XLA, which does not hold
+    Python's GIL, so a caller may start tracing something else in another thread. Not called
+    when no call goes through the store (off, or uncacheable); None: nothing."""
+    previous = getattr(_hook, "callback", None)
+    _hook.callback = callback
+    try:
+        yield
+    finally:
+        _hook.callback = previous
+
+
+def _traced() -> None:
+    callback = getattr(_hook, "callback", None)
+    if callback is not None:
+        _hook.callback = None
+        callback()
 
 
 @functools.cache
@@ -200,6 +225,7 @@ def call(fn, *args):
         # (and so miss the keys of the programs they flow into).
         entry = _decode(payload)
     _loaded[cache_key] = entry
+    _traced()
     exported, skeleton = entry
     arrays = [x for x in jax.tree.leaves(args) if eqx.is_array(x)]
     results = iter(exported.call(*arrays))

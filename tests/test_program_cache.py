@@ -199,3 +199,27 @@ def test_simulate_through_the_store_is_bit_identical(tmp_path, scene, t_end):
     assert done.returncode == 0, done.stderr[-3000:]
     assert "identical" in done.stdout
     assert len(list((tmp_path / "p").glob("*.jaxexport"))) == 1
+
+
+def test_when_traced_calls_back_once_after_the_trace_and_before_the_compile(store):
+    """`when_traced`'s callback runs once, when the first call through the store has its
+    program and has compiled nothing yet (jaxdeploy simulate starts its reference run's trace
+    there, in a second thread)."""
+    seen = []
+    compiled_before = []
+
+    def callback():
+        seen.append(len(_entries(store)))  # the entry is written: traced and exported
+        compiled_before.append(len(_compiles))
+
+    x = jnp.linspace(0.1, 2.0, 5)
+    with _program_cache.when_traced(callback):
+        count = len(_compiles)
+        _program_cache.call(_toy, x, 2.5, 2)
+        _program_cache.call(_toy, x, 2.5, 2)
+    assert seen == [1]
+    assert compiled_before == [count]  # before the backend compile of the program
+    with _program_cache.when_traced(callback):
+        _program_cache.enable(None)  # store off: the call is `fn(*args)`, no callback
+        _program_cache.call(_toy, x, 2.5, 4)
+    assert seen == [1]

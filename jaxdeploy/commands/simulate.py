@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 import os
 import sys
+import threading
+import time
 
 import numpy as np
 
@@ -164,20 +166,19 @@ def run(args) -> int:
     return _simulate(args, scene, params, control, t_end, mechanism, initial, out, phases)
 
 
-def _reference(args, scene, params, trajectory, phases):
-    """The ideal-joint reference run at the run's saved times (`batch.reference_run`), read
-    from the reference cache when it holds it (`_reference_cache`); None with
-    `--no-reference`."""
+def _reference(scene, params, ts, phases):
+    """The ideal-joint reference run at the saved times `ts` (`batch.reference_run`), read
+    from the reference cache when it holds it (`_reference_cache`)."""
     from ..batch import reference_run
     from . import _reference_cache
 
-    if args.no_reference:
-        return None
-    ts = np.asarray(trajectory.ts)
+    ts = np.asarray(ts)
 
     def compute():
         label = "reference: the ideal-joint mechanism at the same saved times"
-        with phases.phase("reference", label, split_compile=True):
+        with phases.phase(
+            "reference", label, split_compile=True, compile_key="reference_compile_s"
+        ):
             run = reference_run(scene, params, ts)
             run.q.block_until_ready()
         return run
@@ -188,15 +189,71 @@ def _reference(args, scene, params, trajectory, phases):
     return reference
 
 
+class _ReferenceBeside:
+    """The reference run made in a second thread beside the run, at the saved times the run
+    will have (`expected_ts`): its tracing starts once the run's own tracing is done
+    (`start`, from `_program_cache.when_traced`), so that it overlaps the run's compile and
+    integration, which leave Python's GIL free (on two cores the reference then costs little
+    wall time; before, it came after the run). `result(ts)` is the reference at the run's
+    actual saved times `ts`: the one made beside when they are `expected_ts` (always, unless
+    the run failed and its unreached saves are not times), else one made now at `ts`, as
+    the command did before; an error of the one made beside is raised only when it is used."""
+
+    def __init__(self, scene, params, expected_ts, phases):
+        self.scene, self.params, self.phases = scene, params, phases
+        self.expected_ts = np.asarray(expected_ts)
+        self._thread = None
+        self._outcome = None
+
+    def start(self) -> None:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._make, name="reference", daemon=True)
+            self._thread.start()
+
+    def _make(self) -> None:
+        try:
+            run = _reference(self.scene, self.params, self.expected_ts, self.phases)
+            self._outcome = (run, None)
+        except BaseException as err:  # noqa: BLE001 - re-raised in the caller's thread
+            self._outcome = (None, err)
+
+    def result(self, ts):
+        self.start()
+        self._thread.join()
+        ts = np.asarray(ts)
+        if not np.array_equal(ts, self.expected_ts):
+            return _reference(self.scene, self.params, ts, self.phases)
+        run, err = self._outcome
+        if err is not None:
+            raise err
+        return run
+
+
+def _while_running(mechanism, trajectory, analysis_type) -> dict:
+    """Work that needs the run's arrays' shapes but not their values, done while the run is
+    under way: the programs of the contact histories the analysis evaluates (traced and
+    compiled now, run again on the result later), matplotlib's import, and the run's
+    metadata (its git query is a subprocess). **Returns:** `run_metadata()`."""
+    from ..analysis import Analysis, clearance_joint_history
+    from ..io import run_metadata
+    from ..mechanism import RevoluteClearance
+
+    if analysis_type.plot is not Analysis.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot  # noqa: F401
+    if mechanism.find(RevoluteClearance):
+        clearance_joint_history(mechanism, trajectory)
+    return run_metadata()
+
+
 def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phases) -> int:
+    import jax.numpy as jnp
+
+    from .. import _program_cache
     from ..analysis import analysis_class
-    from ..io import (
-        atomic_write_json,
-        atomic_write_npz,
-        prepare_output_dir,
-        run_metadata,
-        strict_json,
-    )
+    from ..io import atomic_write_json, atomic_write_npz, prepare_output_dir, strict_json
     from ..simulation import simulate
     from ._results import run_quantities, units_of
 
@@ -207,19 +264,35 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
     if os.path.exists(stale_marker):
         os.unlink(stale_marker)
 
+    analysis_type = analysis_class(scene)
+    beside = None
+    if (
+        analysis_type.uses_reference
+        and scene.ideal_counterpart() is not None
+        and not args.no_reference
+    ):
+        # The saved times `simulate` makes for n_save (t0 = 0), checked against the run's own
+        # in `result`.
+        beside = _ReferenceBeside(scene, params, jnp.linspace(0.0, t_end, args.n_save), phases)
+
     label = f"integrate to t_end = {t_end:g} s ({control.solver_name()})"
     with phases.phase("integrate", label, split_compile=True):
-        trajectory = simulate(
-            mechanism,
-            initial,
-            t_end,
-            n_save=args.n_save,
-            # diffrax's bar shows the simulated time as a percentage of t_end.
-            progress=not args.quiet
-            and sys.stderr.isatty()
-            and INTEGRATE_S_PER_SIMULATED_S.get(scene.name, math.inf) * t_end > PROGRESS_BAR_S,
-            control=control,
-        )
+        with _program_cache.when_traced(None if beside is None else beside.start):
+            trajectory = simulate(
+                mechanism,
+                initial,
+                t_end,
+                n_save=args.n_save,
+                # diffrax's bar shows the simulated time as a percentage of t_end.
+                progress=not args.quiet
+                and sys.stderr.isatty()
+                and INTEGRATE_S_PER_SIMULATED_S.get(scene.name, math.inf) * t_end > PROGRESS_BAR_S,
+                control=control,
+            )
+        if beside is not None:
+            beside.start()  # if the program cache did not (off, or the run not cacheable)
+        # JAX has dispatched the run and returned: meanwhile, what does not need its result.
+        versions = _while_running(mechanism, trajectory, analysis_type)
         trajectory.q.block_until_ready()
 
     summary = {
@@ -227,10 +300,11 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
         "t_end_s": t_end,
         **run_quantities(trajectory),
     }
-    analysis_type = analysis_class(scene)
     reference = None
-    if analysis_type.uses_reference and scene.ideal_counterpart() is not None:
-        reference = _reference(args, scene, params, trajectory, phases)
+    if beside is not None:
+        waited = time.time()
+        reference = beside.result(trajectory.ts)
+        phases.add("reference_wait_s", time.time() - waited)
     analysis = analysis_type(scene, params, mechanism, trajectory, reference)
     with phases.phase("outputs", "outputs: summary quantities, trajectory.npz"):
         summary.update(analysis.summary())
@@ -252,7 +326,7 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
     # simulate draws no random numbers: the run is reproducible from params and versions.
     summary["seed"] = None
     summary["step_control"] = control.to_json()
-    summary["versions"] = run_metadata()
+    summary["versions"] = versions
     atomic_write_json(f"{out}/summary.json", summary)
     if not args.quiet:
         shown = {
