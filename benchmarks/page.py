@@ -346,5 +346,44 @@ def render(record, wp, targets, *, command, cut) -> str:
             "import, scene build, compile, run, ideal-joint reference, files) in a fresh "
             "process with an empty persistent compilation cache (cold), then again (warm).",
             "",
+            *simulate_phases(s),
         ]
     return "\n".join(lines)
+
+
+# What each phase of `jaxdeploy simulate`'s summary.json measures (docs/results.md).
+SIMULATE_PHASES = {
+    "start_up_s": "interpreter, imports, arguments (the wall before the phases began)",
+    "build_s": "scene build and initial state (its two assembly programs compiled or loaded)",
+    "compile_s": "tracing, lowering and compiling the run's program (cold) or loading it (warm)",
+    "integrate_s": "the run, and beside it the contact-history programs, matplotlib's import",
+    "reference_compile_s": "the reference run's compile, in a second thread beside the run",
+    "reference_s": "the reference run, in that thread (cold; warm: read from its cache)",
+    "reference_wait_s": "waiting for the reference after the run",
+    "outputs_s": "summary quantities, trajectory.npz",
+    "plots_s": "the figures (matplotlib)",
+}
+
+
+def simulate_phases(s: dict) -> list[str]:
+    """The phases of the cold and the warm `jaxdeploy simulate`, where their time went."""
+    cold, warm = s.get("cold_phases"), s.get("warm_phases")
+    if not cold or not warm:
+        return []
+    lines = [
+        f"Wall time of each phase [s] (CPU time of the whole process: cold "
+        f"{s['cold_cpu_s']:.1f} s, warm {s['warm_cpu_s']:.1f} s). The reference's phases run "
+        "in a second thread, overlapping the run's: they do not add to the wall.",
+        "",
+        "| phase | what | cold | warm |",
+        "|---|---|---|---|",
+    ]
+    names = list(SIMULATE_PHASES) + [k for k in {**cold, **warm} if k not in SIMULATE_PHASES]
+    for name in names:
+        if name in cold or name in warm:
+            values = [f"{p[name]:.2f}" if name in p else "–" for p in (cold, warm)]
+            what = SIMULATE_PHASES.get(name, "")
+            lines.append(f"| {name.removesuffix('_s')} | {what} | {values[0]} | {values[1]} |")
+    lines.append(f"| total | the whole command | {s['cold_s']:.2f} | {s['warm_s']:.2f} |")
+    lines.append("")
+    return lines

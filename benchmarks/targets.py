@@ -189,17 +189,35 @@ def gradient(t_end: float = 0.2, repeats: int = 2) -> dict:
 def simulate_cold_warm(scene: str = "deploy_array") -> dict:
     """Wall time of `jaxdeploy simulate SCENE` (the scene's defaults, the whole command:
     import, scene build, compile, run, ideal reference, files) twice in fresh processes with
-    a new, empty persistent compilation cache: cold (nothing cached), then warm."""
+    a new, empty persistent compilation cache: cold (nothing cached), then warm. Beside each
+    wall: the CPU time of the process (user + system, every thread) and the phases its
+    `summary.json` recorded (`start_up_s`: the wall before the phases began: interpreter,
+    imports, arguments)."""
+    import json
+    import resource
+
+    out = {"scene": scene}
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "JAXDEPLOY_CACHE_DIR": os.path.join(tmp, "cache")}
-        walls = []
         for run in ("cold", "warm"):
             command = [sys.executable, "-c", "import sys; from jaxdeploy.cli import main; "
                        "sys.exit(main())", "simulate", scene, "--out",
                        os.path.join(tmp, run), "--quiet"]  # fmt: skip
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
             start = time.perf_counter()
             done = subprocess.run(command, env=env, capture_output=True, text=True)
-            walls.append(time.perf_counter() - start)
+            wall = time.perf_counter() - start
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
             if done.returncode != 0:
                 raise RuntimeError(f"jaxdeploy simulate failed ({run}): {done.stderr[-2000:]}")
-    return {"scene": scene, "cold_s": walls[0], "warm_s": walls[1]}
+            with open(os.path.join(tmp, run, "summary.json")) as f:
+                summary = json.load(f)
+            out[f"{run}_s"] = wall
+            out[f"{run}_cpu_s"] = (after.ru_utime - before.ru_utime) + (
+                after.ru_stime - before.ru_stime
+            )
+            out[f"{run}_phases"] = {
+                "start_up_s": wall - summary["wall_time_s"],
+                **summary["phases"],
+            }
+    return out
