@@ -420,6 +420,10 @@ def breakdown(ours, ts, rtol: float = 1e-5, repeats: int = 20) -> dict:
             cpu[c].append(time.process_time() - start)
     best = {c: min(v) for c, v in cpu.items()}
     per_step = (best["saved_2"] - best["horizon_2us"]) / (steps["saved_2"] - steps["horizon_2us"])
+    try:
+        operations = loop_operations(ours, ts, control)
+    except Exception as err:  # the count reads XLA's text, which may change: not a lost part
+        operations = {"error": f"{type(err).__name__}: {err}"}
     return {
         "rtol": rtol,
         "cpu_s": best,
@@ -427,6 +431,60 @@ def breakdown(ours, ts, rtol: float = 1e-5, repeats: int = 20) -> dict:
         "per_step_s": per_step,
         "per_saved_time_s": (best["saved_4001"] - best["saved_2"]) / (ts.size - 2),
         "per_call_s": best["horizon_2us"],
+        "operations": operations,
+    }
+
+
+_TRIVIAL = ("get-tuple-element", "bitcast", "parameter", "tuple", "constant")
+
+
+def loop_operations(ours, ts, control) -> dict:
+    """The operations XLA's CPU runtime executes one after another in the compiled program of
+    `breakdown`'s run (`ts`: 4001 saved times): in the body of the step loop (the while loop of
+    the entry computation, its nested loops not counted), in the body of the loop inside it
+    over a step's Runge–Kutta stages, and in the body of the loop over the saved times within
+    a step (the nested loop that carries the (4001, …) output buffers). An operation: every
+    instruction of a loop body but tuple plumbing, bitcasts and constants (a fusion is one);
+    `lapack`: LAPACK calls (factorisations and triangular solves) among them."""
+    import re
+
+    from jaxdeploy.simulation import _solve, prepare
+
+    run = prepare(ours.mech, ours.s0, float(ts[-1]), ts=ts, control=control)
+    args = (ours.mech, run.y0, run.t0, run.t_end, run.dt0, run.ts, run.solver, run.controller,
+            run.max_steps, False, run.adjoint, False)  # fmt: skip
+    text = re.sub(r"/\*.*?\*/", "", _solve.lower(*args).lowered.compile().as_text())
+    bodies = {
+        m.group(2): m.group(3)
+        for m in re.finditer(r"^(ENTRY )?(%[\w.\-]+) [^\n]*\{\n(.*?)\n\}", text, re.M | re.S)
+    }
+    entry = re.search(r"^ENTRY (%[\w.\-]+)", text, re.M).group(1)
+
+    def instructions(name):
+        for line in bodies[name].split("\n"):
+            line = re.sub(r", metadata=.*", "", line)
+            m = re.match(r"\s*(ROOT )?%[\w.\-]+ = (.*)", line)
+            op = m and re.search(r"(?:\)|\]|\}|\w) ([a-z][\w-]*)\(", m.group(2))
+            if op and op.group(1) not in _TRIVIAL:
+                yield op.group(1), line
+
+    def count(name):
+        ops = list(instructions(name))
+        lapack = sum("lapack_" in line for _, line in ops)
+        return {"operations": len(ops), "lapack": lapack}
+
+    def loops(name):
+        return [(re.search(r"body=(%[\w.\-]+)", line).group(1), line)
+                for op, line in instructions(name) if op == "while"]  # fmt: skip
+
+    (step,) = [body for body, _ in loops(entry)]
+    inner = loops(step)
+    saves = [body for body, line in inner if f"[{ts.size}" in line]
+    stages = [body for body, line in inner if f"[{ts.size}" not in line]
+    return {
+        "step_body": count(step),
+        "stage_body": count(stages[0]) if len(stages) == 1 else None,
+        "save_body": count(saves[0]) if len(saves) == 1 else None,
     }
 
 

@@ -113,6 +113,20 @@ def test_cached_first_call_is_its_own_row_and_not_the_verdict():
     assert "Warm: the fastest of 3" in text
 
 
+def test_breakdown_renders_the_cost_per_operation():
+    bd = {"rtol": 1e-5, "steps": {"saved_4001": 300, "saved_2": 300, "horizon_2us": 2},
+          "cpu_s": {"saved_4001": 0.02, "saved_2": 0.014, "horizon_2us": 0.002},
+          "per_step_s": 40e-6, "per_saved_time_s": 2e-6, "per_call_s": 0.002,
+          "operations": {"step_body": {"operations": 100, "lapack": 4},
+                         "stage_body": {"operations": 50, "lapack": 3},
+                         "save_body": {"operations": 20, "lapack": 0}}}  # fmt: skip
+    text = page.breakdown_lines(bd)[0]
+    assert "a saved time is 20 operations, 100 ns each" in text  # 2 µs / 20
+    assert "a step 100 + 6 × 50, 100 ns each" in text  # 40 µs / 400
+    bd["operations"] = {"error": "KeyError: x"}
+    assert "operations one after another" not in page.breakdown_lines(bd)[0]
+
+
 def test_provenance_round_trips_through_the_page_header():
     record = provenance.finish(provenance.start(["benchmarks"], allow_dirty=True))
     text = "# page\n\n" + provenance.header(record, "make bench") + "\n\nbody\n"
