@@ -246,3 +246,18 @@ def test_andrews_part_runs_quick(tmp_path):
     assert all(r["status"] == "ok" for r in result["rows"]), result["rows"]
     assert by[(page.ANDREWS_FAMILY, "rtol=1e-06")]["error_rel"] < 1e-3
     assert by[("scipy DOP853", "rtol=1e-08")]["error_rel"] < 1e-6
+
+
+@pytest.mark.slow
+def test_first_call_in_new_processes_gives_the_same_run_cold_and_cached():
+    """The new-process first calls (`work_precision.new_process_first_calls`): both processes
+    finish the run, and the one that reads the persistent caches the first one filled (the
+    program cache's exported program) takes the same steps to the same error."""
+    from benchmarks.work_precision import new_process_first_calls
+
+    runs = new_process_first_calls("tsit5", 1e-5)
+    cold, cached = runs["cold"], runs["cached"]
+    assert cold["status"] == cached["status"] == "ok"
+    assert cold["steps"] == cached["steps"] > 0
+    assert cold["error_m"] == cached["error_m"] < 1e-5
+    assert cold["warm_calls"] >= 3 and cached["first_s"] > 0
