@@ -177,6 +177,11 @@ def _apply_factor(factors, permutation, rhs):
     return jax.lax.linalg.triangular_solve(factors, y, left_side=True, lower=False)[:, 0]
 
 
+# Slots of the Newton loop's packed scalars (`GeneralizedAlpha.step`).
+_IT, _SINCE, _NORM, _CONVERGED, _REFRESH, _OK, _EVALUATIONS = range(7)
+_N_SCALARS = 7
+
+
 def _run_if(pred, fn, operand):
     """`fn(operand)` where `pred`, else `operand`, evaluating `fn` only when needed.
 
@@ -451,39 +456,40 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
             def f_flat(x):
                 return jax.flatten_util.ravel_pytree(f(unravel(x)))[0]
 
-            def refreshed(operand):
-                x, _, evaluations = operand
-                return x, _factor(iteration_matrix(x)), evaluations + 1
-
+            # The loop's scalars travel packed in one float vector (`_IT`, `_SINCE`, …): XLA's
+            # CPU backend runs each loop-carried array as its own kernel and copy, so seven
+            # scalars cost seven kernels per iteration where one vector costs one.
             def cond(c):
-                return (~c["converged"]) & c["ok"] & (c["it"] < self.newton_max_iterations)
+                s = c[2]
+                return (
+                    (s[_CONVERGED] == 0.0) & (s[_OK] != 0.0) & (s[_IT] < self.newton_max_iterations)
+                )
 
             def body(c):
-                x, factors, evaluations = _run_if(
-                    c["refresh"], refreshed, (c["x"], c["factors"], c["evaluations"])
-                )
-                fresh = c["refresh"]  # the matrix was formed at this very iterate
-                since = jnp.where(fresh, 0, c["since"])
+                x, factors, s = c
+                fresh = s[_REFRESH] != 0.0  # the matrix is formed at this very iterate
+                factors = _run_if(fresh, lambda _: _factor(iteration_matrix(x)), factors)
+                since = jnp.where(fresh, 0.0, s[_SINCE])
                 dx = _apply_factor(*factors, f_flat(x))
                 x1 = x - dx
                 # Relative to the larger of predictor and iterate: when the correction cancels
                 # the predictor (large h ω), roundoff in u is ε|q̂|, not ε|q|.
                 magnitude = jnp.maximum(jnp.abs(q_hat), jnp.abs(q_hat + x1[:n]))
-                scale = self.newton_atol + self.newton_rtol * magnitude
                 # The scaled multipliers μ = λ/β' (units of M u) are measured in the same
                 # tolerance, converted by the mean mass: with a reused matrix the positions can
                 # look converged while μ (the reactions) is not, and an unconverged μ leaves
                 # the dynamic equations unsatisfied.
-                scale_mu = mass_unit * self.newton_atol + self.newton_rtol * jnp.maximum(
-                    jnp.abs(x[n:]), jnp.abs(x1[n:])
+                scale = jnp.concatenate(
+                    [
+                        self.newton_atol + self.newton_rtol * magnitude,
+                        mass_unit * self.newton_atol
+                        + self.newton_rtol * jnp.maximum(jnp.abs(x[n:]), jnp.abs(x1[n:])),
+                    ]
                 )
-                norm = jnp.maximum(
-                    jnp.max(jnp.abs(dx[:n]) / scale, initial=0.0),
-                    jnp.max(jnp.abs(dx[n:]) / scale_mu, initial=0.0),
-                )
+                norm = jnp.max(jnp.abs(dx) / scale, initial=0.0)
                 finite = jnp.all(jnp.isfinite(dx))
                 # Contraction rate, measured once the same matrix has served two iterations.
-                theta = jnp.where(since > 0, norm / c["norm"], 0.0)
+                theta = jnp.where(since > 0, norm / s[_NORM], 0.0)
                 eta = theta / (1.0 - theta)
                 # Newton proper (fresh matrix) converges quadratically: a correction within
                 # tolerance leaves an error far below it. With a reused matrix the remaining
@@ -503,30 +509,35 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
                 refresh = ~converged & (
                     full | ~finite | (theta > self.refresh_rate) | (since + 1 >= self.refresh_after)
                 )
-                return dict(
-                    x=jnp.where(keep, x1, x),
-                    factors=factors,
-                    evaluations=evaluations,
-                    refresh=refresh,
-                    since=since + 1,
-                    norm=norm,
-                    it=c["it"] + 1,
-                    converged=converged,
-                    ok=finite | ~fresh,
-                )
+                packed = [None] * _N_SCALARS
+                packed[_IT] = s[_IT] + 1.0
+                packed[_SINCE] = since + 1.0
+                packed[_NORM] = norm
+                packed[_CONVERGED] = converged
+                packed[_REFRESH] = refresh
+                packed[_OK] = finite | ~fresh
+                packed[_EVALUATIONS] = s[_EVALUATIONS] + fresh
+                packed = jnp.stack([jnp.asarray(v, dtype=x0.dtype) for v in packed])
+                return jnp.where(keep, x1, x), factors, packed
 
-            init = dict(
-                x=x0,
-                factors=factors_prev,
-                evaluations=jnp.array(0),
-                refresh=jnp.asarray(full) | ~valid_prev,
-                since=jnp.array(0),
-                norm=jnp.array(jnp.inf, dtype=x0.dtype),
-                it=jnp.array(0),
-                converged=jnp.array(False),
-                ok=jnp.array(True),
+            scalars = [0.0] * _N_SCALARS
+            scalars[_NORM] = jnp.inf
+            scalars[_REFRESH] = jnp.asarray(full) | ~valid_prev
+            scalars[_OK] = 1.0
+            init = (
+                x0,
+                factors_prev,
+                jnp.stack([jnp.asarray(v, dtype=x0.dtype) for v in scalars]),
             )
-            c = jax.lax.while_loop(cond, body, init)
+            x_end, factors_end, s = jax.lax.while_loop(cond, body, init)
+            c = dict(
+                x=x_end,
+                factors=factors_end,
+                it=s[_IT].astype(int),
+                converged=s[_CONVERGED] != 0.0,
+                ok=s[_OK] != 0.0,
+                evaluations=s[_EVALUATIONS].astype(int),
+            )
             # Auxiliary outputs as floats: custom_root's JVP rule mishandles int/bool aux.
             aux = (
                 c["it"].astype(x0.dtype),
