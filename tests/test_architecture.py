@@ -17,6 +17,7 @@ FLOORS = {
     "io": 0,
     "_compilation_cache": 0,
     "_program_cache": 0,
+    "_tracing": 0,
     "contact": 1,
     "mechanism": 2,
     "solvers": 3,

@@ -51,6 +51,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _program_cache
+from .._tracing import traced_once
 from .assembly import ConsistentState
 from .bodies import CLOCK, Body, Kinematics
 from .clearance import RevoluteClearance
@@ -303,6 +304,7 @@ def _joint_history(mechanism, index, q, v, memory):
     return jax.vmap(at)(q, v, memory)
 
 
+@traced_once
 def extremes_at(mechanism: Mechanism, q, v, qdd, memory) -> dict:
     """The quantities whose extremes a run tracks, at one state `(q, q̇, q̈, memory)`:
 

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from .._tracing import traced_once
 from .bodies import GROUND, Body, Kinematics, cross
 from .element import AbstractElement
 from .saddle_point import SOLUTIONS
@@ -248,6 +249,7 @@ class Mechanism(eqx.Module):
             for e, m in zip(self.elements, memory, strict=True)
         )
 
+    @traced_once
     def memory_after_step(self, memory, q, v, step):
         """Memory after an accepted step of length `step` (s) that ended at `(q, v)`."""
         kin = self.kinematics(q, v)
@@ -339,6 +341,10 @@ class Mechanism(eqx.Module):
             raise ValueError(
                 f"linear_solve = {linear_solve!r} is invalid; valid: {', '.join(SOLUTIONS)}"
             )
+        return self._accelerations(q, v, t, memory, baumgarte, linear_solve)
+
+    @traced_once
+    def _accelerations(self, q, v, t, memory, baumgarte, linear_solve):
         mass_inverse = 1.0 / self.mass_diagonal()
         forces = self.generalized_forces(q, v, t, memory)
         if self.n_constraints == 0:

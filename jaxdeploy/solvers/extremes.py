@@ -96,15 +96,23 @@ class TrackExtremes(dfx.AbstractWrappedSolver):
             dense = self.interpolation_cls(t0=t0, t1=t1, **dense_info)
 
             def velocity(t):
-                return dense.evaluate(t).v
+                return _motion(dense, t)[1]
 
             for k in range(1, self.samples + 1):
                 t = t0 + (t1 - t0) * (k / (self.samples + 1))
-                y = dense.evaluate(t)
-                # The interpolant's q̈ (an acceleration solve) is left unused, and compiled out.
+                q, v, memory = _motion(dense, t)
                 qdd = jax.jvp(velocity, (t,), (jnp.ones_like(t),))[1]
-                extremes = merge_extremes(extremes, extremes_at(mech, y.q, y.v, qdd, y.memory))
+                extremes = merge_extremes(extremes, extremes_at(mech, q, v, qdd, memory))
         return y1, y_error, dense_info, TrackedState(inner, extremes), result
+
+
+def _motion(dense, t):
+    """`(q, q̇, memory)` of a dense output at `t`: its `motion` (no acceleration solve) where
+    it has one, else its `evaluate` (whose q̈ is left unused)."""
+    if hasattr(dense, "motion"):
+        return dense.motion(t)
+    y = dense.evaluate(t)
+    return y.q, y.v, y.memory
 
 
 def tracked_extremes(solver_state) -> dict | None:

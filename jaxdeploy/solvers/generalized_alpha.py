@@ -48,6 +48,7 @@ import jax
 import jax.flatten_util
 import jax.numpy as jnp
 
+from .._tracing import traced_once
 from ..mechanism.saddle_point import least_change_correction
 from ..mechanism.sparsity import compressed_jacobian
 from .term import MechanismState, MechanismTerm, accelerations_at, mechanism_of
@@ -228,6 +229,7 @@ class StepSystem(NamedTuple):
         q, v = self.q_hat + u, self.v_hat + self.gamma_p * u
         return self.mechanism.generalized_forces(q, v, self.t, self.memory) / self.beta_p
 
+    @traced_once
     def residual(self, z):
         u, mu = z
         mech = self.mechanism
@@ -238,6 +240,7 @@ class StepSystem(NamedTuple):
             )
         return dynamic, mech.constraints(self.q_hat + u, self.t)
 
+    @traced_once
     def iteration_matrix(self, x):
         """∂r/∂(u, μ) at the flat iterate `x = (u, μ)`:
 
@@ -297,6 +300,12 @@ class GeneralizedAlphaInterpolation(dfx.AbstractLocalInterpolation):
         y = self.hermite.evaluate(t0)
         qdd, lam = accelerations_at(self.mechanism, y.q, y.v, t0, self.memory)
         return MechanismState(y.q, y.v, qdd, lam, y.memory)
+
+    def motion(self, t):
+        """`(q, q̇, memory)` at `t`, as `evaluate` gives them, without the acceleration
+        solve (what `TrackExtremes` samples)."""
+        y = self.hermite.evaluate(t)
+        return y.q, y.v, y.memory
 
 
 class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):

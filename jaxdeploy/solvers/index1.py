@@ -38,6 +38,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from .._tracing import traced_once
 from ..mechanism import Mechanism
 from ..mechanism.saddle_point import least_change_correction
 from .term import MechanismState, MechanismTerm, accelerations_at, mechanism_of
@@ -52,6 +53,7 @@ def stabilised_accelerations(
     return mechanism.accelerations(q, v, t, memory, baumgarte, linear_solve)
 
 
+@traced_once
 def project_onto_constraints(mechanism: Mechanism, q, v, t, iterations: int = 2):
     """Mass-weighted projection of `(q, q̇)` onto `Φ = 0`, `Φ_q q̇ + Φ_t = 0` (see module
     docstring; `saddle_point.least_change_correction`). `iterations` Gauss–Newton steps for
@@ -135,10 +137,23 @@ class MechanismInterpolation(dfx.AbstractLocalInterpolation):
     def evaluate(self, t0, t1=None, left=True):
         if t1 is not None:
             return jax.tree.map(lambda b, a: b - a, self.evaluate(t1), self.evaluate(t0))
-        s = (t0 - self.t0) / (self.t1 - self.t0)
+        q, v, memory, step_memory = self._motion(t0)
+        qdd, lam = accelerations_at(self.mechanism, q, v, t0, step_memory, self.linear_solve)
+        return MechanismState(q, v, qdd, lam, memory)
+
+    def motion(self, t):
+        """`(q, q̇, memory)` at `t`, as `evaluate` gives them, without the acceleration
+        solve (what `TrackExtremes` samples: tracing that solve only for the compiler to
+        drop it cost a third of the traced program)."""
+        return self._motion(t)[:3]
+
+    def _motion(self, t):
+        """`(q, q̇, memory, step_memory)`: the output state at `t` and the memory its
+        accelerations see (the step's, with the interpolated internal states if any)."""
+        s = (t - self.t0) / (self.t1 - self.t0)
         # Internal states (if any, the third part) are output through the memory, linear;
         # the accelerations see the inner interpolant's values of them.
-        inner = self.inner.evaluate(t0)
+        inner = self.inner.evaluate(t)
         q, v = inner[:2]
         dq, dv = self.correction
 
@@ -146,12 +161,11 @@ class MechanismInterpolation(dfx.AbstractLocalInterpolation):
             return a + s * (b - a)
 
         q, v = q + s * dq, v + s * dv
-        memory = self.memory
+        step_memory = self.memory
         if self.mechanism.has_internal_state:
-            memory = self.mechanism.with_internal(memory, inner[2])
-        qdd, lam = accelerations_at(self.mechanism, q, v, t0, memory, self.linear_solve)
+            step_memory = self.mechanism.with_internal(step_memory, inner[2])
         memory = jax.tree.map(linear, self.y0.memory, self.y1.memory)
-        return MechanismState(q, v, qdd, lam, memory)
+        return q, v, memory, step_memory
 
 
 class MechanismODESolver(dfx.AbstractAdaptiveSolver):
