@@ -261,3 +261,19 @@ def test_first_call_in_new_processes_gives_the_same_run_cold_and_cached():
     assert cold["steps"] == cached["steps"] > 0
     assert cold["error_m"] == cached["error_m"] < 1e-5
     assert cold["warm_calls"] >= 3 and cached["first_s"] > 0
+
+
+def test_simulate_phases_render_cold_and_warm_side_by_side():
+    """The page's `jaxdeploy simulate` table: one row per phase either run recorded, "–"
+    where the other did not, and the total; nothing without the phases (an older JSON)."""
+    s = dict(scene="deploy_array", cold_s=30.0, warm_s=6.0, cold_cpu_s=40.0, warm_cpu_s=7.0,
+             cold_phases={"start_up_s": 1.0, "build_s": 5.0, "compile_s": 15.0,
+                          "reference_compile_s": 6.0, "reference_wait_s": 0.5},
+             warm_phases={"start_up_s": 1.0, "build_s": 0.5, "compile_s": 0.7,
+                          "reference_wait_s": 0.0})  # fmt: skip
+    text = "\n".join(page.simulate_phases(s))
+    assert "| build | " in text and "| 5.00 | 0.50 |" in text
+    assert "| reference_compile | " in text and "| 6.00 | – |" in text
+    assert "| total | the whole command | 30.00 | 6.00 |" in text
+    assert "cold 40.0 s, warm 7.0 s" in text
+    assert page.simulate_phases(dict(scene="deploy_array", cold_s=30.0, warm_s=4.0)) == []
