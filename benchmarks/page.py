@@ -277,8 +277,9 @@ def render(record, wp, targets, *, command, cut) -> str:
         "minimal-coordinate model, `tests/independent/slider_crank_minimal.py`). Every "
         "configuration uses the classical Lankarani–Nikravesh rule (v⁻ held from the onset). "
         "jaxdeploy: adaptive runs at atol = 1e-3 rtol with the scene's dt_max = 0.1 ms, saving "
-        "q, q̇ and memory at the 4001 times (`simulate(..., accelerations=False)`; the family "
-        "“q̈ and λ saved” shows what the default's acceleration solve per saved time adds); "
+        'q and q̇ at the 4001 times, as solve_ivp does (`simulate(..., outputs="motion")`; '
+        "the family “q̈, λ, memory saved” is simulate's default, an acceleration solve per "
+        "saved time more); "
         "compile is the family's (in the bench's process: its first configuration's first call "
         "minus warm; tolerances and steps are data, the other configurations reuse the "
         "program). First call: "

@@ -65,7 +65,7 @@ class Config:
     rtol: float | None = None
     dt: float | None = None  # fixed step [s]
     force_function: str = "python"  # Exudyn only
-    accelerations: bool = False  # jaxdeploy only: also save q̈ and λ (`simulate`'s option)
+    outputs: str = "motion"  # jaxdeploy only: what a saved time keeps (`simulate`'s option)
 
     @property
     def setting(self) -> str:
@@ -115,9 +115,10 @@ def configurations(quick: bool, exudyn: bool) -> list[Config]:
         Config("jaxdeploy generalized-α fixed", "jaxdeploy", "generalized_alpha", dt=h)
         for h in fixed
     ]
-    # What saving q̈ and λ at the 4001 times costs (an acceleration solve per saved time).
+    # What saving the whole state at the 4001 times costs (simulate's default: q̈ and λ are an
+    # acceleration solve per saved time).
     out += [
-        Config("jaxdeploy Tsit5, q̈ and λ saved", "jaxdeploy", "tsit5", rtol=t, accelerations=True)
+        Config("jaxdeploy Tsit5, q̈, λ, memory saved", "jaxdeploy", "tsit5", rtol=t, outputs="all")
         for t in ([1e-6] if quick else [1e-5, 1e-7, 1e-9])
     ]
     for method, tolerances in peers.items():
@@ -172,7 +173,7 @@ class _Ours:
 
         def run():
             tr = simulate(self.mech, self.s0, float(self.ts[-1]), ts=self.ts, control=control,
-                          accelerations=cfg.accelerations)  # fmt: skip
+                          outputs=cfg.outputs)  # fmt: skip
             q = np.asarray(tr.q)
             return q[:, 6], int(tr.stats["num_accepted_steps"]), tr.status()
 
@@ -297,7 +298,7 @@ def measure(quick: bool = False, repeats: int = 3, log=print, root: str = ".") -
     families = [f for f in NEW_PROCESS_FAMILIES if any(c.solver == f for c in todo)]
     new_process = {}
     for solver in families[:1] if quick else families:
-        first_cfg = next(c for c in todo if c.solver == solver and not c.accelerations)
+        first_cfg = next(c for c in todo if c.solver == solver and c.outputs == "motion")
         new_process[solver] = new_process_first_calls(solver, first_cfg.rtol, root)
         log(f"  new process, {solver} {first_cfg.setting}: " + ", ".join(
             f"{k} first {v['first_s']:.2f} s (setup {v['setup_s']:.2f} s)"
@@ -309,7 +310,7 @@ def measure(quick: bool = False, repeats: int = 3, log=print, root: str = ".") -
         )
         compile_s = math.nan
         if cfg.kind == "jaxdeploy":
-            key = (cfg.solver, cfg.dt is None, cfg.accelerations)
+            key = (cfg.solver, cfg.dt is None, cfg.outputs)
             if key not in compiled:
                 compiled[key] = max(first - warm, 0.0)
             compile_s = compiled[key]
@@ -318,7 +319,7 @@ def measure(quick: bool = False, repeats: int = 3, log=print, root: str = ".") -
         row = Row(cfg.family, cfg.setting, cfg.kind, error, compile_s, first, warm, steps, status,
                   **stats)  # fmt: skip
         child = new_process.get(cfg.solver) if cfg.kind == "jaxdeploy" else None
-        if child and cfg.rtol is not None and not cfg.accelerations and status == "ok":
+        if child and cfg.rtol is not None and cfg.outputs == "motion" and status == "ok":
             # The family's program: the child's first call beyond its warm one, then this
             # configuration's own warm call.
             row.first_new_process_s = child["cold"]["first_s"] - child["cold"]["warm_s"] + warm
@@ -407,7 +408,7 @@ def breakdown(ours, ts, rtol: float = 1e-5, repeats: int = 20) -> dict:
 
     def call(case):
         t_end, saved = cases[case]
-        tr = simulate(ours.mech, ours.s0, t_end, ts=saved, control=control, accelerations=False)
+        tr = simulate(ours.mech, ours.s0, t_end, ts=saved, control=control, outputs="motion")
         np.asarray(tr.q)
         return tr
 
@@ -452,7 +453,7 @@ def loop_operations(ours, ts, control) -> dict:
 
     run = prepare(ours.mech, ours.s0, float(ts[-1]), ts=ts, control=control)
     args = (ours.mech, run.y0, run.t0, run.t_end, run.dt0, run.ts, run.solver, run.controller,
-            run.max_steps, False, run.adjoint, False)  # fmt: skip
+            run.max_steps, False, run.adjoint, "motion")  # fmt: skip
     text = re.sub(r"/\*.*?\*/", "", _solve.lower(*args).lowered.compile().as_text())
     bodies = {
         m.group(2): m.group(3)

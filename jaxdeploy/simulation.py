@@ -43,7 +43,8 @@ class Trajectory(eqx.Module):
     """Saved states and run statistics.
 
     `ts` (N,), `q`, `v`, `qdd` (N, n), `lam` (N, m), `memory` (pytree, leading axis N);
-    `qdd` and `lam` are None for `simulate(..., accelerations=False)`;
+    `qdd` and `lam` are None for `simulate(..., outputs="state")`, and `memory` too for
+    `outputs="motion"`;
     `result` (a diffrax RESULTS code), `stats` (steps, accepted, rejected, Newton iterations);
     `step_times`: with `simulate(..., replay_steps=...)`, the ends of the steps taken (padded
     with +inf; pass them as `replay_steps` to integrate other parameters over the same steps),
@@ -229,22 +230,29 @@ def _save_times(t0, t_end, n_save, ts):
     return jnp.linspace(t0, t_end, n_save)
 
 
-def _without_accelerations(t, y, args):
-    """A saved state without its q̈ and λ (`simulate(..., accelerations=False)`): the dense
+def _state_only(t, y, args):
+    """A saved state without its q̈ and λ (`simulate(..., outputs="state")`): the dense
     output's acceleration solve is then unused and XLA compiles it out."""
     return y._replace(qdd=None, lam=None)
+
+
+def _motion_only(t, y, args):
+    """A saved state's q and q̇ alone (`simulate(..., outputs="motion")`)."""
+    return y._replace(qdd=None, lam=None, memory=None)
+
+
+# `simulate`'s `outputs`: what a saved time keeps (None: the whole state, diffrax's default).
+_OUTPUTS = {"all": None, "state": _state_only, "motion": _motion_only}
 
 
 @eqx.filter_jit
 def _solve(
     mechanism, y0, t0, t_end, dt0, ts, solver, controller, max_steps, progress, adjoint,
-    accelerations=True,
+    outputs="all",
 ):  # fmt: skip
     meter = dfx.TqdmProgressMeter() if progress else dfx.NoProgressMeter()
-    # Saved states as the dense output gives them (diffrax's default), or without q̈ and λ.
-    states = (
-        dfx.SubSaveAt(ts=ts) if accelerations else dfx.SubSaveAt(ts=ts, fn=_without_accelerations)
-    )
+    keep = _OUTPUTS[outputs]
+    states = dfx.SubSaveAt(ts=ts) if keep is None else dfx.SubSaveAt(ts=ts, fn=keep)
     return integrate(
         mechanism,
         y0,
@@ -286,7 +294,7 @@ def simulate(
     replay_steps=False,
     locate_events=True,
     extreme_samples: int = 1,
-    accelerations: bool = True,
+    outputs: str = "all",
 ) -> Trajectory:
     """Integrate `mechanism` from `initial` (a `consistent_state`) to `t_end`.
 
@@ -330,18 +338,22 @@ def simulate(
     - `extreme_samples`: interior points of every step, besides its end, at which the run's
       extremes (`Trajectory.extremes`) are evaluated on the dense output (default 1, the
       midpoint; `jaxdeploy.solvers.TrackExtremes`).
-    - `accelerations`: evaluate the saved q̈ and λ (default). Each saved time's q̈ and λ are
-      an acceleration solve at the interpolated state (`jaxdeploy.solvers.term.
-      accelerations_at`); with `False` they are not evaluated (`Trajectory.qdd` and `.lam`
-      are None) and everything else is bit for bit the same. Saving many times of a short run
-      is then much cheaper: slider_crank's 4001 saved times over 4 ms were about a third of a
-      Tsit5 run's cost (`benchmarks/work_precision.py`).
+    - `outputs`: what each saved time keeps. `"all"` (default): q, q̇, q̈, λ and the memory;
+      the saved q̈ and λ are an acceleration solve at the interpolated state
+      (`jaxdeploy.solvers.term.accelerations_at`). `"state"`: q, q̇ and the memory
+      (`Trajectory.qdd` and `.lam` are None); `"motion"`: q and q̇ alone (`.memory` None too),
+      what `scipy.integrate.solve_ivp` returns at its `t_eval`. Everything that is kept is bit
+      for bit the same; saving many times of a short run gets much cheaper: slider_crank's
+      4001 saved times over 4 ms were about a third of a Tsit5 run's cost with `"all"`
+      (`benchmarks/work_precision.py`).
 
     **Returns:** a `Trajectory`; check `.ok` / `.status()`: a failed solve keeps the states it
     finished and says when and why it stopped.
     """
-    if not isinstance(accelerations, bool):
-        raise TypeError(f"accelerations = {accelerations!r} is invalid: it must be True or False")
+    if not isinstance(outputs, str) or outputs not in _OUTPUTS:
+        raise ValueError(
+            f"outputs = {outputs!r} is invalid: valid values are {', '.join(map(repr, _OUTPUTS))}"
+        )
     run = prepare(
         mechanism,
         initial,
@@ -379,7 +391,7 @@ def simulate(
         run.max_steps,
         progress,
         run.adjoint,
-        accelerations,
+        outputs,
     )
     (ts, end), (ys, _) = sol.ts, sol.ys
     return Trajectory.from_states(

@@ -215,24 +215,29 @@ def test_dense_output_is_the_inner_solvers_interpolant():
     assert np.max(np.abs(np.asarray(tr.v[:, 6]) - v)) < 1e-6
 
 
-def test_saving_without_accelerations_leaves_everything_else_bit_identical():
-    """`accelerations=False` drops the saved q̈ and λ (an acceleration solve per saved time)
-    and nothing else: positions, velocities, memory, steps and extremes are the same bits,
-    through a damped impact with its onset located."""
+def test_saving_fewer_outputs_leaves_the_kept_ones_bit_identical():
+    """`outputs="state"` drops the saved q̈ and λ (an acceleration solve per saved time),
+    `"motion"` the memory too, and nothing else: positions, velocities, memory, steps and
+    extremes are the same bits, through a damped impact with its onset located."""
     scene = Impact(damping="lankarani_nikravesh")
     params = scene.resolve_params({"impact_speed": 0.5, "clearance": 2e-5})
     mech = scene.build(params)
     s0 = scene.initial_state(params, mech)
     ts = np.linspace(0.0, 2e-4, 401)
-    runs = [
-        simulate(mech, s0, 2e-4, solver="tsit5", rtol=1e-7, atol=1e-10, ts=ts, **options)
-        for options in ({}, {"accelerations": False})
+    full, state, motion = [
+        simulate(mech, s0, 2e-4, solver="tsit5", rtol=1e-7, atol=1e-10, ts=ts, outputs=kept)
+        for kept in ("all", "state", "motion")
     ]
-    full, lean = runs
-    assert full.ok and lean.ok and int(full.stats["num_rejected_steps"]) > 0
-    assert lean.qdd is None and lean.lam is None and full.qdd.shape == full.q.shape
-    kept = [(tr.ts, tr.q, tr.v, tr.memory, tr.stats, tr.extremes, tr.t_reached) for tr in runs]
-    for a, b in zip(*(jax.tree.leaves(k) for k in kept), strict=True):
-        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
-    with pytest.raises(TypeError, match="accelerations"):
-        simulate(mech, s0, 2e-4, solver="tsit5", rtol=1e-7, ts=ts, accelerations="no")
+    assert full.ok and state.ok and motion.ok and int(full.stats["num_rejected_steps"]) > 0
+    assert state.qdd is None and state.lam is None and full.qdd.shape == full.q.shape
+    assert motion.qdd is None and motion.memory is None
+
+    def kept(tr, memory=True):
+        return jax.tree.leaves((tr.ts, tr.q, tr.v, tr.memory if memory else None, tr.stats,
+                                tr.extremes, tr.t_reached))  # fmt: skip
+
+    for other, memory in ((state, True), (motion, False)):
+        for a, b in zip(kept(full, memory), kept(other, memory), strict=True):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    with pytest.raises(ValueError, match="outputs = 'no' is invalid"):
+        simulate(mech, s0, 2e-4, solver="tsit5", rtol=1e-7, ts=ts, outputs="no")
