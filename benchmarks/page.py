@@ -142,6 +142,26 @@ def breakdown_lines(bd) -> list[str]:
     ]
 
 
+def _compile_phases_text(new_process) -> str:
+    """Where the cold new-process first calls went (`work_precision._compile_phases`), or
+    nothing for a record without it."""
+    parts = []
+    for solver, runs in sorted(new_process.items()):
+        phases = runs.get("cold", {}).get("compile_phases_s")
+        if phases:
+            parts.append(
+                f"{solver} {phases['trace']:.2f} s tracing, {phases['lower']:.2f} s lowering, "
+                f"{phases['xla_compile']:.2f} s XLA compiling"
+            )
+    if not parts:
+        return ""
+    return (
+        "Of a cold first call (JAX's compile events, wall time of the top-level programs): "
+        + "; ".join(parts)
+        + ". "
+    )
+
+
 def _operations_text(bd) -> str:
     """The compiled loops' operation counts (`work_precision.loop_operations`), or nothing."""
     ops = bd.get("operations")
@@ -296,7 +316,8 @@ def render(record, wp, targets, *, command, cut) -> str:
         )
         + "Caches filled: the same in a second new process reading the caches the first one "
         "filled. "
-        "scipy peers (`benchmarks/scipy_peer.py`): minimal coordinates, numpy, `solve_ivp` with "
+        + _compile_phases_text(wp.get("new_process") or {})
+        + "scipy peers (`benchmarks/scipy_peer.py`): minimal coordinates, numpy, `solve_ivp` with "
         "onset and separation events, atol = 1e-3 rtol. Exudyn "
         f"({wp['exudyn'] or 'not installed'}; `benchmarks/exudyn_peer.py`): its generalized-α, "
         "fixed steps, v⁻ from the onset on each step's Hermite interpolant; first call includes "

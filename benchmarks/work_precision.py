@@ -260,10 +260,35 @@ def first_call_child(solver: str, rtol: float, root: str = ".") -> dict:
     setup = time.perf_counter() - start
     stats = {}
     cfg = Config("", "jaxdeploy", solver, rtol=rtol)
+    phases = _compile_phases()
     (x, steps, status), first, warm = timed_calls(ours.call(cfg), None, 3, stats)
     error = float(np.max(np.abs(x - x_ref))) if status == "ok" else math.nan
     return dict(setup_s=setup, first_s=first, warm_s=warm, steps=steps, status=status,
-                error_m=error, **stats)  # fmt: skip
+                error_m=error, compile_phases_s=phases, **stats)  # fmt: skip
+
+
+# JAX's compile events (`jax/_src/dispatch.py`), each the wall time of one top-level program's
+# phase (a nested `jit` traced inside another is part of the outer one's time).
+_COMPILE_EVENTS = {
+    "/jax/core/compile/jaxpr_trace_duration": "trace",
+    "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower",
+    "/jax/core/compile/backend_compile_duration": "xla_compile",
+}
+
+
+def _compile_phases() -> dict:
+    """A dict that from now on sums the wall time [s] of JAX's tracing, lowering and XLA
+    compiling (`_COMPILE_EVENTS`) in this process: where a cold first call's time goes."""
+    import jax
+
+    totals = dict.fromkeys(_COMPILE_EVENTS.values(), 0.0)
+
+    def listener(event, duration, **_):
+        if event in _COMPILE_EVENTS:
+            totals[_COMPILE_EVENTS[event]] += duration
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    return totals
 
 
 def new_process_first_calls(solver: str, rtol: float, root: str = ".") -> dict:

@@ -127,6 +127,29 @@ def test_breakdown_renders_the_cost_per_operation():
     assert "operations one after another" not in page.breakdown_lines(bd)[0]
 
 
+def test_compile_phases_of_a_cold_first_call_render():
+    runs = {
+        "cold": {"compile_phases_s": {"trace": 0.5, "lower": 0.25, "xla_compile": 4.0}},
+        "cached": {"compile_phases_s": {"trace": 0.0, "lower": 0.0, "xla_compile": 0.1}},
+    }
+    text = page._compile_phases_text({"tsit5": runs, "dopri8": {"cold": {}}})
+    assert "tsit5 0.50 s tracing, 0.25 s lowering, 4.00 s XLA compiling" in text
+    assert "dopri8" not in text  # a record without the phases says nothing of them
+    assert page._compile_phases_text({}) == ""
+
+
+def test_compile_phases_listener_sums_jax_compile_events():
+    import jax
+    import jax.numpy as jnp
+
+    from benchmarks import work_precision
+
+    phases = work_precision._compile_phases()
+    inner = jax.jit(lambda x: jnp.sin(x) * 2.0)
+    jax.jit(lambda x: inner(x) + inner(x + 1.0))(jnp.arange(3.0)).block_until_ready()
+    assert phases["trace"] > 0.0 and phases["lower"] > 0.0 and phases["xla_compile"] > 0.0
+
+
 def test_provenance_round_trips_through_the_page_header():
     record = provenance.finish(provenance.start(["benchmarks"], allow_dirty=True))
     text = "# page\n\n" + provenance.header(record, "make bench") + "\n\nbody\n"
