@@ -15,8 +15,9 @@ m × n constraint Jacobian of full row rank. Two ways, same solution in exact ar
   2nd ed., 2006, §16.2), factorised by Cholesky. `S` is m × m instead of (n + m)², needs no
   pivoting, and the elimination with a diagonal `M` is an elementwise scaling. On XLA's CPU
   backend, where a mechanism's step is many small operations, the batched LU of (1) gains
-  less from vectorisation than these elementwise operations and one small Cholesky
-  (`make bench` measures the step's linear-algebra ceiling: docs/performance.md).
+  less from vectorisation than these elementwise operations and one small Cholesky, itself
+  written as array operations up to m = `UNROLLED_MAX_SIZE` (`unrolled_cholesky`; `make
+  bench` measures the step's linear-algebra ceiling: docs/performance.md).
   Conditioning: κ(S) ≤ κ(J)² · max(M)/min(M).
 * **LU of (1)** (`kkt_lu_solution`, partial pivoting). A coordinate that the constraints
   alone fix (a slider's lateral position) gets its acceleration from its constraint row, so
@@ -35,16 +36,79 @@ from __future__ import annotations
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 
+UNROLLED_MAX_SIZE = 16
+"""Largest Schur complement (m × m) factorised by `unrolled_cholesky` rather than LAPACK's
+`potrf` (`jax.scipy.linalg.cho_factor`); chosen at trace time from the static size."""
+
+
+def unrolled_cholesky(a):
+    """Lower Cholesky factor `L` (`L Lᵀ = a`) of a symmetric positive definite m × m matrix
+    (static m; leading axes are batch axes), by the outer-product (right-looking) form of
+    the algorithm (Golub & Van Loan, *Matrix Computations*, 4th ed., 2013, §4.2) written as
+    m steps of array operations:
+
+        l_k = a⁽ᵏ⁾[k:, k] / √a⁽ᵏ⁾[k, k],
+        a⁽ᵏ⁺¹⁾[k+1:, k+1:] = a⁽ᵏ⁾[k+1:, k+1:] − l_k[1:] l_k[1:]ᵀ
+
+    Every ordering of Cholesky's operations (this one, LAPACK's dot-product `potf2`) has the
+    same backward error bound, `L Lᵀ = a + E`, `|E| ≤ γ_{m+1} |L| |Lᵀ|` (Higham, *Accuracy
+    and Stability of Numerical Algorithms*, 2nd ed., 2002, ch. 10); tests/test_saddle_point.py
+    checks it and the solve's backward error at condition numbers up to 1e14.
+
+    Why written out. XLA's CPU backend runs `cholesky` and `triangular_solve` as LAPACK
+    calls, one per matrix: under `vmap` a batch of 7 × 7 Schur complements is a loop of tiny
+    `potrf`/`trsm` calls plus the transposes into and out of their column-major layout. Here
+    each of the m steps is one elementwise operation over the whole batch, which XLA fuses and
+    vectorises across cases. Measured (slider_crank, 4 ms, Tsit5, CPU time on one pinned core,
+    load 8, A/B alternated): a 256-case vmap 0.0168 and 0.0192 s per simulation with LAPACK's
+    factor, 0.0140 s with this one; one at a time 0.0168–0.0184 s either way (within the
+    noise); the bench's step ceiling: `benchmarks/targets.py`, `step_solves_ceiling`.
+    Plain `jax.numpy`: differentiable in both modes. Not positive definite (a rank-deficient
+    J): NaN, as LAPACK's factor gives.
+    """
+    m = a.shape[-1]
+    columns = []
+    for k in range(m):
+        pivot = jnp.sqrt(a[..., 0, 0])
+        column = a[..., :, 0] / pivot[..., None]
+        columns.append(jnp.concatenate([jnp.zeros((*a.shape[:-2], k), a.dtype), column], -1))
+        tail = column[..., 1:]
+        a = a[..., 1:, 1:] - tail[..., :, None] * tail[..., None, :]
+    return jnp.stack(columns, axis=-1)
+
+
+def unrolled_cholesky_solve(factor, rhs):
+    """`(L Lᵀ)⁻¹ rhs` for `L = unrolled_cholesky(a)` and a vector `rhs` (leading axes batch):
+    forward substitution `L y = rhs` column by column, then back substitution `Lᵀ x = y`, each
+    m steps of array operations over the batch (`unrolled_cholesky`: why)."""
+    m = factor.shape[-1]
+    y = []
+    b = rhs
+    for k in range(m):
+        y_k = b[..., 0] / factor[..., k, k]
+        y.append(y_k)
+        b = b[..., 1:] - factor[..., k + 1 :, k] * y_k[..., None]
+    x = [None] * m
+    for k in reversed(range(m)):
+        dot = sum((factor[..., i, k] * x[i] for i in range(k + 1, m)), jnp.zeros_like(y[k]))
+        x[k] = (y[k] - dot) / factor[..., k, k]
+    return jnp.stack(x, axis=-1)
+
 
 def schur_factor(mass_inverse, jacobian):
-    """Cholesky factor of `S = J M⁻¹ Jᵀ` (eq. 2), for `schur_solve`."""
+    """Cholesky factor of `S = J M⁻¹ Jᵀ` (eq. 2), for `schur_solve`: `unrolled_cholesky` for
+    m ≤ `UNROLLED_MAX_SIZE`, LAPACK's (`jax.scipy.linalg.cho_factor`) above."""
     schur = (jacobian * mass_inverse) @ jacobian.T
+    if schur.shape[-1] <= UNROLLED_MAX_SIZE:
+        return unrolled_cholesky(schur)
     return jsl.cho_factor(schur, lower=True)
 
 
 def schur_solve(factor, rhs):
     """`S⁻¹ rhs` with the factor from `schur_factor`."""
-    return jsl.cho_solve(factor, rhs)
+    if isinstance(factor, tuple):
+        return jsl.cho_solve(factor, rhs)
+    return unrolled_cholesky_solve(factor, rhs)
 
 
 def range_space_solution(mass_inverse, jacobian, forces, rhs):
