@@ -38,7 +38,9 @@ import jax.scipy.linalg as jsl
 
 UNROLLED_MAX_SIZE = 16
 """Largest Schur complement (m × m) factorised by `unrolled_cholesky` rather than LAPACK's
-`potrf` (`jax.scipy.linalg.cho_factor`); chosen at trace time from the static size."""
+`potrf` (`jax.scipy.linalg.cho_factor`); chosen at trace time from the static size. Read when
+a program is traced: programs already traced (jit's caches, the mechanism's `traced_once`
+functions) keep the factor they were traced with until `jax.clear_caches()`."""
 
 
 def unrolled_cholesky(a):
