@@ -12,6 +12,32 @@ LEVELS = (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)  # m, error levels of the work–p
 PEERS = ("scipy", "exudyn")
 
 
+def _batch_bounds(b: dict) -> str:
+    """What bounds the batch ratio, from the batch run's own numbers: the vmap advances until
+    its slowest case (max / mean accepted steps), and the share of its time in the saved
+    times' acceleration solves (default outputs against `outputs="motion"`)."""
+    parts = []
+    if b.get("steps_mean"):
+        most = b["steps_min_max"][1]
+        parts.append(
+            f"The vmap advances until its slowest case: {most} accepted steps against a mean "
+            f"of {b['steps_mean']:.0f} ({most / b['steps_mean']:.2f}×)."
+        )
+    mo = b.get("motion")
+    if mo:
+        share = 1.0 - mo["vmap_per_simulation_s"] / b["vmap_per_simulation_s"]
+        single = 1.0 - mo["one_at_a_time_per_simulation_s"] / b["one_at_a_time_per_simulation_s"]
+        parts.append(
+            f'Saving q and q̇ alone (`outputs="motion"`) takes {_f(share, ".0%")} off the vmap '
+            f"({mo['vmap_per_simulation_s']:.3g} s per simulation) and "
+            f"{_f(single, '.0%')} "
+            "off one at a time: a vmapped save loop runs, at every step, as many iterations as "
+            "the case with the most saved times in that step, each an acceleration solve for "
+            "every case."
+        )
+    return " ".join(parts) + (" " if parts else "")
+
+
 def _f(x, fmt=".3g"):
     return "–" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, fmt)
 
@@ -235,6 +261,15 @@ def render(record, wp, targets, *, command, cut) -> str:
             f"{b['vmap_per_simulation_s']:.3g} s) | ≥ 3× | "
             f"{_verdict(b['speedup_per_simulation'], 3.0, smaller_is_better=False)} |"
         )
+        mo = b.get("motion")
+        if mo:
+            lines.append(
+                f'| batch saving q, q̇ only (`outputs="motion"`), one at a time / vmap, per '
+                f"simulation | {mo['speedup_per_simulation']:.2f}× "
+                f"({mo['one_at_a_time_per_simulation_s']:.3g} s / "
+                f"{mo['vmap_per_simulation_s']:.3g} s) | ≥ 3× | "
+                f"{_verdict(mo['speedup_per_simulation'], 3.0, smaller_is_better=False)} |"
+            )
     if c:
         share = b["speedup_per_simulation"] / c["speedup_per_solve"] if b else math.nan
         lines.append(
@@ -245,11 +280,19 @@ def render(record, wp, targets, *, command, cut) -> str:
         st = c.get("step")
         if st:
             share = b["speedup_per_simulation"] / st["speedup_per_case"] if b else math.nan
+            before = st.get("lapack")
             lines.append(
-                f"| ceiling of the step's own linear algebra ({st['scene']}: iteration-matrix "
-                f"inverse + index-1 accelerations), one / {st['cases']} vmapped, per case | "
+                f"| ceiling of the step's own linear algebra ({st['scene']} Tsit5: index-1 "
+                f"accelerations + projection), one / {st['cases']} vmapped, per case | "
                 f"{st['speedup_per_case']:.2f}× (the simulation reaches {_f(share, '.0%')} of "
-                "it) | (reference) | – |"
+                "it)"
+                + (
+                    f"; {before['speedup_per_case']:.2f}× with LAPACK's Cholesky of the Schur "
+                    "complement"
+                    if before
+                    else ""
+                )
+                + " | (reference) | – |"
             )
     g = targets.get("gradient")
     if g:
@@ -351,16 +394,22 @@ def render(record, wp, targets, *, command, cut) -> str:
             f"{b['steps_min_max'][0]}–{b['steps_min_max'][1]} per case) against one at a time "
             f"(mean of {b['singles_timed']} cases spread over the range, compile "
             f"{b['one_at_a_time_compile_s']:.3g} s). Solver: one at a time "
-            f"`{b.get('one_at_a_time_solver', '?')}` (modified Newton), the vmap "
-            f"`{b.get('vmap_solver', '?')}` (`jaxdeploy.batch.vmapped_control`: a vmapped "
-            "modified Newton refreshes its matrix for every case whenever one case needs it). "
-            f"The ceilings: {c['iterations']} chained "
+            f"`{b.get('one_at_a_time_solver', '?')}`, the vmap `{b.get('vmap_solver', '?')}` "
+            "(`jaxdeploy.batch.vmapped_control` changes only generalized-α, to Newton's method "
+            "proper). " + _batch_bounds(b) + f"The ceilings: {c['iterations']} chained "
             f"{c['size']}×{c['size']} `jnp.linalg.solve` ({c['one_s']:.3g} s for one system, "
             f"{c['vmapped_s']:.3g} s for {c['cases']} vmapped)"
             + (
                 f"; {c['step']['iterations']} chained evaluations of the step's linear algebra "
                 f"({c['step']['one_s']:.3g} s for one case, {c['step']['vmapped_s']:.3g} s for "
-                f"{c['step']['cases']} vmapped)."
+                f"{c['step']['cases']} vmapped"
+                + (
+                    f"; with LAPACK's factor {c['step']['lapack']['one_s']:.3g} s and "
+                    f"{c['step']['lapack']['vmapped_s']:.3g} s"
+                    if c["step"].get("lapack")
+                    else ""
+                )
+                + ")."
                 if c.get("step")
                 else "."
             ),

@@ -27,7 +27,12 @@ def _timed(fn, *args):
 def batch(cases: int = 256, singles: int = 8, t_end: float = 4e-3) -> dict:
     """Per-simulation cost of slider_crank (the scene's default step control) as one vmap of
     `cases` cases against one at a time (`singles` of them, the mean), restitution spread over
-    0.8–0.99. Run in a process pinned to one core, so both use the same hardware."""
+    0.8–0.99. Run in a process pinned to one core, so both use the same hardware.
+
+    Twice: with the default outputs (q, q̇, q̈, λ and memory at each of 401 saved times), and
+    with `outputs="motion"` (q and q̇ alone). The difference is the saved times' acceleration
+    solves: a vmapped save loop runs, at every step, as many iterations as the case with the
+    most saved times in that step, each an acceleration solve for every case."""
     import jax
     import jax.numpy as jnp
 
@@ -39,32 +44,41 @@ def batch(cases: int = 256, singles: int = 8, t_end: float = 4e-3) -> dict:
     restitution = np.linspace(0.8, 0.99, cases)
     shared.pop("restitution")
     ts = jnp.linspace(0.0, t_end, 401)
-    # The batch runs as `simulate_batch` does (`vmapped_control`: generalized-α with Newton
-    # proper); one at a time is a single run's default (modified Newton).
-    vmapped = batch_function(scene, ("restitution",), shared, t_end, ts)
-    compile_vmap, _ = _timed(vmapped, (jnp.asarray(restitution),))
-    warm_vmap, trajectory = _timed(vmapped, (jnp.asarray(restitution),))
-    compile_vmap -= warm_vmap
-    steps = np.asarray(trajectory.stats["num_accepted_steps"])
-
-    one = jax.jit(lambda e: run_scene(scene, {**shared, "restitution": e}, t_end, ts=ts))
     picks = restitution[np.linspace(0, cases - 1, singles).astype(int)]
-    compile_one, _ = _timed(one, picks[0])
-    walls = [_timed(one, e)[0] for e in picks]
-    compile_one -= walls[0]
-    per_single = float(np.mean(walls))
+
+    def measure(**options):
+        # The batch runs as `simulate_batch` does (`vmapped_control`, which changes only
+        # generalized-α, to Newton's method proper); slider_crank's default is Tsit5 on the
+        # index-1 form, so both sides run the same solver.
+        vmapped = batch_function(scene, ("restitution",), shared, t_end, ts, **options)
+        compile_vmap, _ = _timed(vmapped, (jnp.asarray(restitution),))
+        warm_vmap, trajectory = _timed(vmapped, (jnp.asarray(restitution),))
+        one = jax.jit(
+            lambda e: run_scene(scene, {**shared, "restitution": e}, t_end, ts=ts, **options)
+        )
+        compile_one, _ = _timed(one, picks[0])
+        walls = [_timed(one, e)[0] for e in picks]
+        per_single = float(np.mean(walls))
+        return {
+            "vmap_warm_s": warm_vmap,
+            "vmap_per_simulation_s": warm_vmap / cases,
+            "vmap_compile_s": compile_vmap - warm_vmap,
+            "one_at_a_time_per_simulation_s": per_single,
+            "one_at_a_time_compile_s": compile_one - walls[0],
+            "speedup_per_simulation": per_single / (warm_vmap / cases),
+        }, np.asarray(trajectory.stats["num_accepted_steps"])
+
+    default, steps = measure()
+    motion, _ = measure(outputs="motion")
     return {
         "scene": "slider_crank",
         "t_end_s": t_end,
         "cases": cases,
         "singles_timed": singles,
-        "vmap_warm_s": warm_vmap,
-        "vmap_per_simulation_s": warm_vmap / cases,
-        "vmap_compile_s": compile_vmap,
-        "one_at_a_time_per_simulation_s": per_single,
-        "one_at_a_time_compile_s": compile_one,
-        "speedup_per_simulation": per_single / (warm_vmap / cases),
+        **default,
+        "motion": motion,
         "steps_min_max": [int(steps.min()), int(steps.max())],
+        "steps_mean": float(steps.mean()),
         "vmap_solver": vmapped_control(scene.default_control).solver_name(),
         "one_at_a_time_solver": scene.default_control.solver_name(),
     }
@@ -104,16 +118,21 @@ def solve_ceiling(cases: int = 256, size: int = 16, iterations: int = 2000) -> d
 
 
 def step_solves_ceiling(cases: int = 256, iterations: int = 2000) -> dict:
-    """vmap's gain on the linear algebra of one slider_crank step alone, the ceiling for the
-    batched simulation: `iterations` chained evaluations of (a) the inverse of the
-    generalized-α iteration matrix's saddle-point form `[[M, Φ_qᵀ], [Φ_q, 0]]` (what a Newton
-    refresh factorises) and (b) the index-1 accelerations (`Mechanism.accelerations`, the
-    range-space solve of the error estimate and the saved states), each case with its own
-    restitution; one case against `cases` vmapped, same core."""
+    """vmap's gain on the linear algebra of one slider_crank Tsit5 step alone, the ceiling
+    for the batched simulation: `iterations` chained evaluations of (a) the index-1
+    accelerations (`Mechanism.accelerations`: forces, Φ_q, γ and the range-space solve, as at
+    every Runge–Kutta stage, the step's end and each saved time) and (b) the projection onto
+    the constraints (`project_onto_constraints`: two Gauss–Newton position corrections and a
+    velocity correction, each a Schur-complement solve), each case with its own restitution;
+    one case against `cases` vmapped, same core. Measured with the Schur complement factorised
+    as the package does (`saddle_point.unrolled_cholesky`, m = 7) and with LAPACK's
+    `potrf`/`trsm` (`UNROLLED_MAX_SIZE = 0`, the factor before it), in the same run."""
     import jax
     import jax.numpy as jnp
 
+    from jaxdeploy.mechanism import saddle_point
     from jaxdeploy.scenes import SliderCrank
+    from jaxdeploy.solvers.index1 import project_onto_constraints
 
     scene = SliderCrank()
     base = dict(scene.resolve_params())
@@ -123,31 +142,38 @@ def step_solves_ceiling(cases: int = 256, iterations: int = 2000) -> dict:
         mechanism = scene.build(params)
         state = scene.initial_state(params, mechanism)
         q, t = state.q, 0.0
-        jac = mechanism.constraint_jacobian(q, t)
-        m = jac.shape[0]
-        kkt = jnp.block([[jnp.diag(mechanism.mass_diagonal()), jac.T], [jac, jnp.zeros((m, m))]])
 
         def body(_, v):
-            inverse = jnp.linalg.inv(kkt + 1e-9 * jnp.diag(jnp.concatenate([v, v[:m]])))
             qdd, _ = mechanism.accelerations(q, v, t, state.memory)
-            return v + 1e-12 * (qdd + inverse[: v.shape[0], 0])
+            q1, v1 = project_onto_constraints(mechanism, q + 1e-9 * v, v + 1e-9 * qdd, t)
+            return v1 + 1e-12 * (qdd + q1)
 
         return jax.lax.fori_loop(0, iterations, body, state.v)
 
     restitution = jnp.linspace(0.8, 0.99, cases)
-    single, many = jax.jit(chain), jax.jit(jax.vmap(chain))
-    _timed(single, restitution[0])
-    _timed(many, restitution)
-    t_one = min(_timed(single, restitution[0])[0] for _ in range(3))
-    t_many = min(_timed(many, restitution)[0] for _ in range(3))
-    return {
-        "scene": "slider_crank",
-        "cases": cases,
-        "iterations": iterations,
-        "one_s": t_one,
-        "vmapped_s": t_many,
-        "speedup_per_case": cases * t_one / t_many,
-    }
+    out = {"scene": "slider_crank", "cases": cases, "iterations": iterations}
+    default_size = saddle_point.UNROLLED_MAX_SIZE
+    for factor, size in (("lapack", 0), ("unrolled", default_size)):
+        # Traced programs are cached with the factor they were traced with (jit, and the
+        # mechanism's `traced_once` functions): clear them on each change.
+        saddle_point.UNROLLED_MAX_SIZE = size
+        jax.clear_caches()
+        try:
+            single, many = jax.jit(chain), jax.jit(jax.vmap(chain))
+            _timed(single, restitution[0])
+            _timed(many, restitution)
+            t_one = min(_timed(single, restitution[0])[0] for _ in range(3))
+            t_many = min(_timed(many, restitution)[0] for _ in range(3))
+        finally:
+            saddle_point.UNROLLED_MAX_SIZE = default_size
+            jax.clear_caches()
+        out[factor] = {
+            "one_s": t_one,
+            "vmapped_s": t_many,
+            "speedup_per_case": cases * t_one / t_many,
+        }
+    # The package's factor is the ceiling the simulation runs against.
+    return {**out, **out["unrolled"]}
 
 
 GRADIENT_WRT = ("restitution", "friction_coefficient", "panel1_clearance", "panel2_clearance")

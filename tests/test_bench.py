@@ -195,6 +195,12 @@ def test_page_renders_every_target_with_its_verdict():
             steps_min_max=[300, 400],
             singles_timed=8,
             one_at_a_time_compile_s=8.0,
+            steps_mean=320.0,
+            motion=dict(
+                speedup_per_simulation=2.5,
+                one_at_a_time_per_simulation_s=0.08,
+                vmap_per_simulation_s=0.033,
+            ),
         ),  # fmt: skip
         "ceiling": dict(
             size=16,
@@ -210,6 +216,7 @@ def test_page_renders_every_target_with_its_verdict():
                 one_s=0.01,
                 vmapped_s=0.853,
                 speedup_per_case=3.0,
+                lapack=dict(one_s=0.012, vmapped_s=1.5, speedup_per_case=2.05),
             ),
         ),  # fmt: skip
         "gradient": dict(
@@ -228,7 +235,10 @@ def test_page_renders_every_target_with_its_verdict():
     assert "| batch: one at a time / 256-case vmap, per simulation | 1.50×" in text
     assert "missed: 2× short" in text  # batch 1.5 against ≥ 3
     assert "reaches 75% of it" in text  # 1.5 / 2.0 of the XLA ceiling
-    assert "reaches 50% of it" in text  # 1.5 / 3.0 of the step's own linear algebra
+    assert "reaches 50% of it); 2.05× with LAPACK's Cholesky" in text  # 1.5 / 3.0
+    assert '(`outputs="motion"`), one at a time / vmap, per simulation | 2.50×' in text
+    assert "400 accepted steps against a mean of 320 (1.25×)" in text
+    assert 'Saving q and q̇ alone (`outputs="motion"`) takes 50% off the vmap' in text
     assert "| gradient / forward" in text and "missed: 1.3× the goal" in text
     assert "≤ 15 s | missed: 2× the goal" in text and "≤ 5 s | met" in text
     assert "generalized-α step / Exudyn generalized-α (python force) step" in text  # 0.4
