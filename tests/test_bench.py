@@ -310,3 +310,20 @@ def test_simulate_phases_render_cold_and_warm_side_by_side():
     assert "| total | the whole command | 30.00 | 6.00 |" in text
     assert "cold 40.0 s, warm 7.0 s" in text
     assert page.simulate_phases(dict(scene="deploy_array", cold_s=30.0, warm_s=4.0)) == []
+
+
+def test_step_cost_ratio_is_the_marginal_cost_per_step_when_both_step_sizes_ran():
+    ours, exu = "jaxdeploy generalized-α fixed", "Exudyn generalized-α (python force)"
+    rows = [
+        _row("jaxdeploy", 1e-6, 0.2, 5.0, ours, "h=1e-06 s", 4000),
+        _row("jaxdeploy", 1e-7, 0.5, 5.3, ours, "h=2.5e-07 s", 16000),
+        _row("exudyn", 1e-6, 0.5, 0.6, exu, "h=1e-06 s", 4000),
+        _row("exudyn", 1e-7, 1.7, 1.8, exu, "h=2.5e-07 s", 16000),
+    ]
+    # (0.5 − 0.2)/12000 over (1.7 − 0.5)/12000, where warm/steps at h = 1 µs gives 0.4
+    ratio, how = page.step_cost_ratio(rows)[exu]
+    assert how == "marginal" and ratio == pytest.approx(0.25)
+    # Exudyn without the short step: warm/steps at h = 1 µs on both sides
+    ratio, how = page.step_cost_ratio(rows[:3])[exu]
+    assert how == "total" and ratio == pytest.approx(0.4)
+    assert page.step_cost_ratio(rows[2:]) is None
