@@ -81,19 +81,84 @@ class GeneralizedAlphaState(NamedTuple):
     multipliers and length (`qdd_prev`, `lam_prev`, `step_prev`; 0 before the first step),
     from which Newton's initial guess is extrapolated, and the index-1 accelerations at the
     start of this step and of the previous one (`accel_now`, `accel_prev`), from which the
-    local error is estimated (`local_error_estimate`)."""
+    local error is estimated (`local_error_estimate`).
+
+    Build it with `GeneralizedAlphaState.of`; the vectors and scalars other than `a` and the
+    factorisation are stored packed in one float vector (`history`) and read through the
+    properties of the same names: XLA's CPU backend updates (and, for a rejected step,
+    selects) each array of diffrax's loop state with its own kernel, so eleven arrays cost
+    about eleven kernels per step where four cost four."""
 
     a: jax.Array
-    newton_iterations: jax.Array
-    jacobian_evaluations: jax.Array
+    history: jax.Array
     iteration_factors: jax.Array
     iteration_permutation: jax.Array
-    iteration_factors_valid: jax.Array
-    qdd_prev: jax.Array
-    lam_prev: jax.Array
-    step_prev: jax.Array
-    accel_now: jax.Array
-    accel_prev: jax.Array
+
+    @classmethod
+    def of(
+        cls,
+        *,
+        a,
+        newton_iterations,
+        jacobian_evaluations,
+        iteration_factors,
+        iteration_permutation,
+        iteration_factors_valid,
+        qdd_prev,
+        lam_prev,
+        step_prev,
+        accel_now,
+        accel_prev,
+    ):
+        dtype = a.dtype
+        scalars = [step_prev, newton_iterations, jacobian_evaluations, iteration_factors_valid]
+        history = jnp.concatenate(
+            [qdd_prev, accel_now, accel_prev, lam_prev]
+            + [jnp.reshape(jnp.asarray(x, dtype=dtype), (1,)) for x in scalars]
+        )
+        return cls(a, history, iteration_factors, iteration_permutation)
+
+    def _part(self, k, length=None):
+        """Part k of `history`: the vectors qdd_prev, accel_now, accel_prev (n each), lam_prev
+        (m), then the scalars."""
+        n = self.a.shape[-1]
+        m = self.iteration_factors.shape[-1] - n
+        start = n * min(k, 3) + m * (k > 3) + max(k - 4, 0)
+        if length is None:
+            return self.history[..., start]
+        return self.history[..., start : start + length]
+
+    @property
+    def qdd_prev(self):
+        return self._part(0, self.a.shape[-1])
+
+    @property
+    def accel_now(self):
+        return self._part(1, self.a.shape[-1])
+
+    @property
+    def accel_prev(self):
+        return self._part(2, self.a.shape[-1])
+
+    @property
+    def lam_prev(self):
+        return self._part(3, self.iteration_factors.shape[-1] - self.a.shape[-1])
+
+    @property
+    def step_prev(self):
+        return self._part(4)
+
+    @property
+    def newton_iterations(self):
+        return self._part(5).astype(int)
+
+    @property
+    def jacobian_evaluations(self):
+        return self._part(6).astype(int)
+
+    @property
+    def iteration_factors_valid(self):
+        return self._part(7) != 0.0
 
 
 def error_constants(cf: AlphaCoefficients) -> tuple[float, float]:
@@ -415,7 +480,7 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
                 "e.g. solver='tsit5' or solver='kvaerno5'"
             )
         size = y0.q.shape[0] + y0.lam.shape[0]
-        return GeneralizedAlphaState(
+        return GeneralizedAlphaState.of(
             a=y0.qdd,
             newton_iterations=jnp.array(0),
             jacobian_evaluations=jnp.array(0),
@@ -643,7 +708,7 @@ class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
         result = dfx.RESULTS.where(
             converged, dfx.RESULTS.successful, dfx.RESULTS.nonlinear_divergence
         )
-        state1 = GeneralizedAlphaState(
+        state1 = GeneralizedAlphaState.of(
             a=a1,
             newton_iterations=solver_state.newton_iterations + iterations,
             jacobian_evaluations=solver_state.jacobian_evaluations + evaluations,
