@@ -244,54 +244,80 @@ class RevoluteClearance(AbstractElement):
             return memory  # the internal states (if any) are passed on
         g = self.geometry(kin)
         onset = self._onset()
-        # e = r_Pj − r_Pi is a difference of world positions: its round-off is a few ulps of
-        # their magnitude.
-        magnitude = jnp.linalg.norm(g.contact_point_bearing) + jnp.linalg.norm(
-            g.contact_point_journal
-        )
-        path = StepEccentricity(
-            memory["eccentricity"],
-            memory["eccentricity_rate"],
-            g.eccentricity,
-            g.eccentricity_rate,
-            step,
-            self.clearance,
-            self.eccentricity_smoothing,
-            roundoff=16.0 * jnp.finfo(g.penetration.dtype).eps * magnitude,
-        )
         was_in = memory["in_contact"] > 0.5
         now_in = g.penetration > onset
 
-        def in_contact_at_end():
-            # A contact that began inside this step counts from its onset, located on the step.
-            s_on = jnp.where(was_in, 0.0, path.crossing(onset))
-            held = jnp.where(was_in, memory["impact_velocity"], 0.0)
-            if self.impact_velocity_rule == "onset":
-                # v⁻ = δ̇ at the onset, held; the onset is the only event inside a contact.
-                v_minus = jnp.where(was_in, held, path.rate(s_on))
-                return v_minus, jnp.where(was_in, 1.0, s_on)
-            running_max = jnp.maximum(held, path.max_rate(s_on))
-            # Events that set v⁻ inside the step, for adaptive runs to end a step on
-            # (`event_fraction`): the onset, and an interior peak of δ̇ that raised v⁻ (a
-            # contact the mechanism keeps driving in).
-            s_peak, has_peak = path.peak(s_on)
-            raised = has_peak & (path.rate(s_peak) > jnp.maximum(held, path.rate(s_on)))
-            event = jnp.minimum(jnp.where(was_in, 1.0, s_on), jnp.where(raised, s_peak, 1.0))
-            return running_max, event
-
-        def out_of_contact_at_end():
-            # A contact that ended inside this step: v⁻ resets there, and with it the force
-            # (a rough law's force at its onset level is not zero), so the separation is an
-            # event too. Unlocated, the reset lands on whichever step end follows it, and
-            # runs at any tolerance differed by ~1e-6 c after the first separation
-            # (deploy_array, Dopri8 at rtol 1e-11…1e-13).
-            event = jax.lax.cond(
-                was_in, lambda: path.separation(onset), lambda: jnp.ones_like(g.penetration)
+        def step_path():
+            # e = r_Pj − r_Pi is a difference of world positions: its round-off is a few ulps
+            # of their magnitude.
+            magnitude = jnp.linalg.norm(g.contact_point_bearing) + jnp.linalg.norm(
+                g.contact_point_journal
             )
-            return g.penetration_rate, event
+            return StepEccentricity(
+                memory["eccentricity"],
+                memory["eccentricity_rate"],
+                g.eccentricity,
+                g.eccentricity_rate,
+                step,
+                self.clearance,
+                self.eccentricity_smoothing,
+                roundoff=16.0 * jnp.finfo(g.penetration.dtype).eps * magnitude,
+            )
 
-        # The interpolant's root and peak searches (µs per step) only where they matter.
-        v_minus, event = jax.lax.cond(now_in, in_contact_at_end, out_of_contact_at_end)
+        if self.impact_velocity_rule == "onset":
+            # v⁻ = δ̇ at the onset, held; the onset is the only event inside a contact. The
+            # step's path (and its root searches, µs per step) only where an onset or a
+            # separation happened inside the step (built inside the branch, so a step without
+            # one evaluates none of it).
+            def onset_or_separation():
+                path = step_path()
+
+                def began():
+                    s_on = path.crossing(onset)
+                    return path.rate(s_on), s_on
+
+                def ended():
+                    return g.penetration_rate, path.separation(onset)
+
+                return jax.lax.cond(now_in, began, ended)
+
+            unchanged = (
+                jnp.where(now_in, memory["impact_velocity"], g.penetration_rate),
+                jnp.ones_like(g.penetration),
+            )
+            v_minus, event = jax.lax.cond(now_in != was_in, onset_or_separation, lambda: unchanged)
+        else:
+            path = step_path()
+
+            def in_contact_at_end():
+                # A contact that began inside this step counts from its onset, located on the
+                # step (the root search only then).
+                s_on = jax.lax.cond(
+                    was_in, lambda: jnp.zeros_like(g.penetration), lambda: path.crossing(onset)
+                )
+                held = jnp.where(was_in, memory["impact_velocity"], 0.0)
+                running_max = jnp.maximum(held, path.max_rate(s_on))
+                # Events that set v⁻ inside the step, for adaptive runs to end a step on
+                # (`event_fraction`): the onset, and an interior peak of δ̇ that raised v⁻ (a
+                # contact the mechanism keeps driving in).
+                s_peak, has_peak = path.peak(s_on)
+                raised = has_peak & (path.rate(s_peak) > jnp.maximum(held, path.rate(s_on)))
+                event = jnp.minimum(jnp.where(was_in, 1.0, s_on), jnp.where(raised, s_peak, 1.0))
+                return running_max, event
+
+            def out_of_contact_at_end():
+                # A contact that ended inside this step: v⁻ resets there, and with it the force
+                # (a rough law's force at its onset level is not zero), so the separation is an
+                # event too. Unlocated, the reset lands on whichever step end follows it, and
+                # runs at any tolerance differed by ~1e-6 c after the first separation
+                # (deploy_array, Dopri8 at rtol 1e-11…1e-13).
+                event = jax.lax.cond(
+                    was_in, lambda: path.separation(onset), lambda: jnp.ones_like(g.penetration)
+                )
+                return g.penetration_rate, event
+
+            # The interpolant's root and peak searches (µs per step) only where they matter.
+            v_minus, event = jax.lax.cond(now_in, in_contact_at_end, out_of_contact_at_end)
         internal = {"internal": memory["internal"]} if self.has_internal_state else {}
         return internal | {
             "in_contact": jnp.where(now_in, 1.0, 0.0),
