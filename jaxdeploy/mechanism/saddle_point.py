@@ -36,9 +36,13 @@ from __future__ import annotations
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 
-UNROLLED_MAX_SIZE = 16
+UNROLLED_MAX_SIZE = 8
 """Largest Schur complement (m × m) factorised by `unrolled_cholesky` rather than LAPACK's
-`potrf` (`jax.scipy.linalg.cho_factor`); chosen at trace time from the static size. Read when
+`potrf` (`jax.scipy.linalg.cho_factor`); chosen at trace time from the static size. 8 keeps
+slider_crank (m = 7) unrolled, where a 256-case vmap gains from it, and gives deploy_array
+(m = 16) LAPACK's: unrolled, its simulate program grew from 16 932 to 44 413 XLA operations
+and its XLA compile from 10.5 to 16.3 CPU-s (one core, measured by switching this constant),
+a cost every cold `jaxdeploy simulate` pays while only a vmap gains. Read when
 a program is traced: programs already traced (jit's caches, the mechanism's `traced_once`
 functions) keep the factor they were traced with until `jax.clear_caches()`."""
 
