@@ -366,6 +366,7 @@ def measure(quick: bool = False, repeats: int = 3, log=print, root: str = ".") -
         "exudyn": exudyn_version() if exudyn else None,
         "new_process": new_process,
         "breakdown": breakdown(ours, ts, repeats=5 if quick else 20),
+        "generalized_alpha_step": None if quick else generalized_alpha_operations(ours, ts),
         "rows": [asdict(r) for r in rows],
     }
 
@@ -526,3 +527,28 @@ if __name__ == "__main__":
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     print(json.dumps(first_call_child(args.solver, args.rtol, args.root)))
+
+
+def generalized_alpha_operations(ours, ts) -> dict:
+    """What a fixed generalized-α step executes (the step-cost target's runs, `ts`: the 4001
+    saved times): the operations of the compiled step loop's body and of the Newton loop's
+    body inside it (`loop_operations`), and the Newton iterations per step at the margin
+    between h = 1 µs and 0.25 µs (the runs the step-cost ratio differences)."""
+    from jaxdeploy.simulation import simulate
+
+    try:
+        counts = {}
+        for h in (1e-6, 2.5e-7):
+            control = _control(ours.control, Config("", "jaxdeploy", "generalized_alpha", dt=h))
+            tr = simulate(ours.mech, ours.s0, float(ts[-1]), ts=ts, control=control,
+                          outputs="motion")  # fmt: skip
+            counts[h] = (int(tr.stats["num_steps"]), int(tr.stats["num_newton_iterations"]))
+        ops = loop_operations(ours, ts, control)
+        (steps1, its1), (steps2, its2) = counts[1e-6], counts[2.5e-7]
+        return {
+            "step_body": ops["step_body"],
+            "newton_body": ops["stage_body"],
+            "newton_per_step": (its2 - its1) / (steps2 - steps1),
+        }
+    except Exception as err:  # the count reads XLA's text, which may change: not a lost part
+        return {"error": f"{type(err).__name__}: {err}"}

@@ -327,3 +327,18 @@ def test_step_cost_ratio_is_the_marginal_cost_per_step_when_both_step_sizes_ran(
     ratio, how = page.step_cost_ratio(rows[:3])[exu]
     assert how == "total" and ratio == pytest.approx(0.4)
     assert page.step_cost_ratio(rows[2:]) is None
+
+
+def test_generalized_alpha_step_lines_divide_the_marginal_step_by_its_operations():
+    ours = "jaxdeploy generalized-α fixed"
+    rows = [
+        _row("jaxdeploy", 1e-6, 0.2, 5.0, ours, "h=1e-06 s", 4000),
+        _row("jaxdeploy", 1e-7, 0.5, 5.3, ours, "h=2.5e-07 s", 16000),
+    ]
+    ga = {"step_body": {"operations": 100, "lapack": 0},
+          "newton_body": {"operations": 25, "lapack": 0}, "newton_per_step": 2.0}  # fmt: skip
+    text = " ".join(page.generalized_alpha_lines(ga, rows))
+    # 0.3 s / 12000 steps = 25 µs over 100 + 2 × 25 operations
+    assert "at 25.00 µs per step that is at most 167 ns per operation" in text
+    assert page.generalized_alpha_lines({"error": "x"}, rows) == []
+    assert page.generalized_alpha_lines(ga, rows[:1]) == []
