@@ -257,3 +257,50 @@ def test_impact_diffrax_path_kvaerno5_matches_central_differences():
         scale = np.abs(fd[name]).max()
         assert scale > 0, name
         np.testing.assert_allclose(rev[name], fd[name], rtol=0, atol=1e-4 * scale, err_msg=name)
+
+
+def test_gradient_mode_rule_and_bad_input():
+    """`mode="auto"` is forward mode up to FORWARD_MODE_MAX_PARAMETERS parameters, reverse
+    above; bad modes and counts are refused by name."""
+    from jaxdeploy.fit import FORWARD_MODE_MAX_PARAMETERS, gradient_function, gradient_mode
+
+    assert gradient_mode(1) == "forward"
+    assert gradient_mode(FORWARD_MODE_MAX_PARAMETERS) == "forward"
+    assert gradient_mode(FORWARD_MODE_MAX_PARAMETERS + 1) == "reverse"
+    with pytest.raises(ValueError, match="n_parameters"):
+        gradient_mode(0)
+    scene, base, wrt, t_end, ts, _ = _impact_case()
+    with pytest.raises(ValueError, match="mode"):
+        gradient_function(scene, base, wrt, lambda ch: 0.0, t_end, mode="sideways")
+
+
+@pytest.mark.slow  # two replayed-run compilations: 98 s at load 2.5 (64 s CPU)
+def test_gradient_function_forward_equals_reverse_to_roundoff():
+    """A scalar loss through a rough, damped impact, adaptive steps replayed: the gradient
+    from forward mode (the loss and four tangents in one pass) equals the reverse-mode one
+    to round-off, the loss equals the plain run's, and a vector output is refused."""
+    from jaxdeploy.batch import run_scene
+    from jaxdeploy.fit import gradient_function
+
+    scene, base, wrt, t_end, ts, output = _impact_case()
+
+    def loss(ch):
+        return jnp.sum(output(ch) ** 2)
+
+    results = {}
+    for mode in ("forward", "reverse"):
+        g, x0 = gradient_function(scene, base, wrt, loss, t_end, mode=mode, ts=ts)
+        results[mode] = jax.jit(g)(x0)
+    (v_fwd, g_fwd), (v_rev, g_rev) = results["forward"], results["reverse"]
+    plain = loss(scene.channels(scene.build(base), run_scene(scene, base, t_end, ts=ts)))
+    np.testing.assert_allclose(v_fwd, plain, rtol=1e-12)
+    np.testing.assert_allclose(v_rev, plain, rtol=1e-12)
+    scale = max(abs(float(g_rev[k])) * abs(x0[k]) for k in wrt)
+    assert scale > 0
+    for k in wrt:
+        # Relative to the largest parameter-scaled component (the units differ by 1e12).
+        assert abs(float(g_fwd[k]) - float(g_rev[k])) * abs(x0[k]) <= 1e-10 * scale, k
+        assert float(g_rev[k]) != 0.0, k
+    g, x0 = gradient_function(scene, base, wrt, output, t_end, mode="forward", ts=ts)
+    with pytest.raises(ValueError, match="scalar"):
+        jax.jit(g)(x0)

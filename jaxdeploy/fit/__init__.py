@@ -1,7 +1,9 @@
 """Identification: fit scene parameters to measured channels, with honest uncertainties.
 
 `parameter_jacobian` differentiates any output of a run with respect to scene parameters
-(reverse or forward mode through the solver). `load_measurements` reads CSV/npz data; `fit`
+(reverse or forward mode through the solver); `gradient_function` / `parameter_gradient` give
+a scalar loss and its gradient, in the mode the parameter count makes cheaper
+(`gradient_mode`). `load_measurements` reads CSV/npz data; `fit`
 runs Levenberg–Marquardt through the simulation (forward-mode derivatives through the
 generalized-α solver); `FitResult` reports estimates, standard errors, correlations and the
 loss history; `synthesize` makes noisy synthetic data from a scene. See
@@ -9,7 +11,15 @@ docs/identification.md.
 """
 
 from ._data import MeasurementError, Measurements, load_measurements
-from ._derivatives import central_differences, output_function, parameter_jacobian
+from ._derivatives import (
+    FORWARD_MODE_MAX_PARAMETERS,
+    central_differences,
+    gradient_function,
+    gradient_mode,
+    output_function,
+    parameter_gradient,
+    parameter_jacobian,
+)
 from ._fit import (
     RTOL_CHECK_FLOOR,
     FitResult,
@@ -25,6 +35,7 @@ from ._schedule import RTOL_FLOOR, choose_tolerance, impact_horizons, onset_time
 from ._synthetic import model_channels, synthesize
 
 __all__ = [
+    "FORWARD_MODE_MAX_PARAMETERS",
     "RTOL_CHECK_FLOOR",
     "RTOL_FLOOR",
     "Comparison",
@@ -42,12 +53,15 @@ __all__ = [
     "Measurements",
     "ResidualSpec",
     "fit",
+    "gradient_function",
+    "gradient_mode",
     "levenberg_marquardt",
     "load_measurements",
     "make_parameters",
     "model_channels",
     "output_function",
     "parameter_jacobian",
+    "parameter_gradient",
     "parse_param_spec",
     "plot_fit",
     "synthesize",
