@@ -345,9 +345,11 @@ def render(record, wp, targets, *, command, cut) -> str:
             )
     g = targets.get("gradient")
     if g:
+        mode = g["auto_mode"]
         lines.append(
-            f"| gradient / forward, deploy_array loss over {g['t_end_s']:g} s | "
-            f"{g['ratio']:.2f}× ({g['gradient']['warm_s']:.3g} s / "
+            f"| gradient / forward, deploy_array loss over {g['t_end_s']:g} s ({mode} mode, "
+            f"the choice of `gradient_mode` for {len(g['wrt'])} parameters) | "
+            f"{g['ratio']:.2f}× ({g[f'gradient_{mode}']['warm_s']:.3g} s / "
             f"{g['forward']['warm_s']:.3g} s) | ≤ 3× | {_verdict(g['ratio'], 3.0)} |"
         )
     s = targets.get("simulate")
@@ -470,17 +472,7 @@ def render(record, wp, targets, *, command, cut) -> str:
             "",
         ]
     if g:
-        lines += [
-            "## Gradient",
-            "",
-            f"Loss: mean square of panel 2's tip acceleration over {g['t_end_s']:g} s of "
-            "deploy_array (201 samples, the scene's default step control); reverse-mode gradient "
-            "with respect to " + ", ".join(f"`{w}`" for w in g["wrt"]) + ", steps replayed "
-            f"(`replay_steps=True`, as `jaxdeploy.fit`). Forward: compile "
-            f"{g['forward']['compile_s']:.3g} s, warm {g['forward']['warm_s']:.3g} s; gradient: "
-            f"compile {g['gradient']['compile_s']:.3g} s, warm {g['gradient']['warm_s']:.3g} s.",
-            "",
-        ]
+        lines += gradient_section(g)
     if a:
         lines += andrews_section(a)
     if s:
@@ -530,5 +522,67 @@ def simulate_phases(s: dict) -> list[str]:
             what = SIMULATE_PHASES.get(name, "")
             lines.append(f"| {name.removesuffix('_s')} | {what} | {values[0]} | {values[1]} |")
     lines.append(f"| total | the whole command | {s['cold_s']:.2f} | {s['warm_s']:.2f} |")
+    lines.append("")
+    return lines
+
+
+def gradient_section(g) -> list[str]:
+    """The gradient's costs in both modes and its check against central differences."""
+    fwd, rev, rep, base = (g["gradient_forward"], g["gradient_reverse"], g["replay"],
+                           g["forward"])  # fmt: skip
+    st = g["steps"]
+    lines = [
+        "## Gradient",
+        "",
+        f"Loss: mean square of panel 2's tip acceleration over {g['t_end_s']:g} s of "
+        "deploy_array (201 samples, the scene's default step control); its gradient with "
+        "respect to " + ", ".join(f"`{w}`" for w in g["wrt"]) + " by "
+        "`jaxdeploy.fit.gradient_function` in both modes, steps replayed "
+        "(`replay_steps=True`, as `jaxdeploy.fit`): an undifferentiated adaptive run chooses "
+        'the steps, the run over exactly those steps is differentiated. `mode="auto"` '
+        f"takes {g['auto_mode']} mode here (`gradient_mode`: forward up to "
+        "`FORWARD_MODE_MAX_PARAMETERS` parameters). Warm: best of the rounds, taken in turn.",
+        "",
+        "| run | compile [s] | warm [s] | warm / forward run |",
+        "|---|---|---|---|",
+        f"| forward run (the loss) | {base['compile_s']:.3g} | {base['warm_s']:.3g} | 1 |",
+        f"| forward run, steps replayed (the loss; what every gradient pays first) | "
+        f"{rep['compile_s']:.3g} | {rep['warm_s']:.3g} | {g['replay_ratio']:.2f} |",
+        f"| gradient, forward mode (`jax.jacfwd`, `diffrax.ForwardMode`) | "
+        f"{fwd['compile_s']:.3g} | {fwd['warm_s']:.3g} | {g['ratio_forward']:.2f} |",
+        f"| gradient, reverse mode (`jax.value_and_grad`, `RecursiveCheckpointAdjoint`) | "
+        f"{rev['compile_s']:.3g} | {rev['warm_s']:.3g} | {g['ratio_reverse']:.2f} |",
+        "",
+        f"The two modes' gradients differ by {g['modes_max_relative_difference']:.1e} "
+        f"(largest relative difference over the parameters). The run takes {st['accepted']} "
+        f"accepted and {st['rejected']} rejected steps; reverse mode's default "
+        f"{st['checkpoints']} checkpoints (diffrax's for max_steps = {st['max_steps']}) "
+        "exceed them, so its backward pass recomputes nothing.",
+        "",
+    ]
+    cd = g.get("central_differences")
+    if not cd:
+        return lines
+    smooth = cd["max_relative_error_smooth"]
+    lines += [
+        "**Against central differences** of the same loss, (L(θ + h) − L(θ − h)) / 2h with h "
+        "a relative step of each parameter, every perturbed run over the unperturbed run's "
+        f"{cd['step_ends']} steps (so both sides differentiate one discrete map). Switched "
+        "steps: step ends at which a clearance joint's contact flag (or a latch's) differs "
+        "between the runs at θ + h and θ − h — a contact onset or separation that moved across "
+        "a step end, where the discrete map jumps: the difference then measures the jump, "
+        "not the derivative. Largest disagreement where no step switched: "
+        + (f"{smooth:.1e}." if smooth is not None else "none (every difference switched)."),
+        "",
+        "| parameter | h (relative) | central difference | gradient | relative error | "
+        "switched steps (first at) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in cd["rows"]:
+        first = f" ({r['first_switch_s']:.4g} s)" if r["first_switch_s"] is not None else ""
+        lines.append(
+            f"| `{r['parameter']}` | {r['relative_step']:g} | {r['central_difference']:.6g} | "
+            f"{r['gradient']:.6g} | {r['relative_error']:.1e} | {r['switched_steps']}{first} |"
+        )
     lines.append("")
     return lines

@@ -177,39 +177,165 @@ def step_solves_ceiling(cases: int = 256, iterations: int = 2000) -> dict:
 
 
 GRADIENT_WRT = ("restitution", "friction_coefficient", "panel1_clearance", "panel2_clearance")
+GRADIENT_FD_STEPS = (1e-3, 1e-5, 1e-7)  # relative steps of the central differences
+# Memory flags whose flip between two runs over the same steps switches the discrete map:
+# a clearance joint's contact state, a latch's engagement.
+SWITCH_FLAGS = ("in_contact", "engaged")
 
 
-def gradient(t_end: float = 0.2, repeats: int = 2) -> dict:
+def gradient(t_end: float = 0.2, repeats: int = 2, fd_steps=GRADIENT_FD_STEPS) -> dict:
     """A deploy_array loss (mean square of panel 2's tip acceleration over `t_end`, 201
-    samples; the scene's default step control) and its reverse-mode gradient with respect to
-    `GRADIENT_WRT`, steps replayed as `jaxdeploy.fit` does; warm walls, best of `repeats`."""
+    samples; the scene's default step control) and its gradient with respect to
+    `GRADIENT_WRT` in both modes of `jaxdeploy.fit.gradient_function` (steps replayed, as
+    `jaxdeploy.fit` does), against one forward run and against the forward run with its
+    steps replayed (what every gradient pays before differentiating); warm walls, best of
+    `repeats` rounds taken in turn. Then `gradient_check`: the gradient against central
+    differences at the relative steps `fd_steps`."""
+    import diffrax as dfx
     import jax
     import jax.numpy as jnp
 
     from jaxdeploy.batch import run_scene
+    from jaxdeploy.fit import gradient_function, gradient_mode
     from jaxdeploy.scenes import DeployArray
 
     scene = DeployArray()
     base = scene.resolve_params()
     x0 = {k: jnp.asarray(base[k]) for k in GRADIENT_WRT}
 
-    def loss(x, replay):
-        params = {**base, **x}
-        traj = run_scene(scene, params, t_end, n_save=201, replay_steps=replay)
-        channels = scene.channels(scene.build(params), traj)
+    def loss(channels):
         return jnp.mean(channels["panel2_tip_ay"] ** 2)
 
-    forward = jax.jit(lambda x: loss(x, False))
-    grad = jax.jit(jax.grad(lambda x: loss(x, True)))
+    def run(x, replay):
+        params = {**base, **x}
+        traj = run_scene(scene, params, t_end, n_save=201, replay_steps=replay)
+        return loss(scene.channels(scene.build(params), traj)), traj.stats
+
+    functions = {
+        "forward": jax.jit(lambda x: run(x, False)),
+        "replay": jax.jit(lambda x: run(x, True)[0]),
+    }
+    for mode in ("forward", "reverse"):
+        g, _ = gradient_function(scene, base, GRADIENT_WRT, loss, t_end, mode=mode, n_save=201)
+        functions[f"gradient_{mode}"] = jax.jit(g)
     out = {"scene": "deploy_array", "t_end_s": t_end, "wrt": list(GRADIENT_WRT)}
-    for name, fn in (("forward", forward), ("gradient", grad)):
-        first, value = _timed(fn, x0)
-        warm = min(_timed(fn, x0)[0] for _ in range(repeats))
-        out[name] = {"compile_s": first - warm, "warm_s": warm}
-        if name == "gradient":
-            out["gradient_values"] = {k: float(v) for k, v in value.items()}
-    out["ratio"] = out["gradient"]["warm_s"] / out["forward"]["warm_s"]
+    first, values = {}, {}
+    for name, fn in functions.items():
+        first[name], values[name] = _timed(fn, x0)
+    warm = {name: [] for name in functions}
+    for _ in range(repeats):
+        for name, fn in functions.items():
+            warm[name].append(_timed(fn, x0)[0])
+    for name in functions:
+        best = min(warm[name])
+        out[name] = {"compile_s": first[name] - best, "warm_s": best}
+    stats = values["forward"][1]
+    max_steps = int(stats["max_steps"])
+    out["steps"] = {"accepted": int(stats["num_accepted_steps"]),
+                    "rejected": int(stats["num_rejected_steps"]), "max_steps": max_steps,
+                    "checkpoints": dfx.RecursiveCheckpointAdjoint().checkpoints
+                    or _default_checkpoints(max_steps)}  # fmt: skip
+    out["loss"] = float(values["forward"][0])
+    grads = {m: {k: float(v) for k, v in values[f"gradient_{m}"][1].items()}
+             for m in ("forward", "reverse")}  # fmt: skip
+    out["gradient_values"] = grads
+    out["modes_max_relative_difference"] = max(
+        abs(grads["forward"][k] - grads["reverse"][k]) / abs(grads["reverse"][k])
+        for k in GRADIENT_WRT
+    )
+    out["auto_mode"] = gradient_mode(len(GRADIENT_WRT))
+    for mode in ("forward", "reverse"):
+        out[f"ratio_{mode}"] = out[f"gradient_{mode}"]["warm_s"] / out["forward"]["warm_s"]
+    out["ratio"] = out[f"ratio_{out['auto_mode']}"]
+    out["replay_ratio"] = out["replay"]["warm_s"] / out["forward"]["warm_s"]
+    out["central_differences"] = gradient_check(
+        scene, base, loss, t_end, grads[out["auto_mode"]], fd_steps
+    )
     return out
+
+
+def _default_checkpoints(max_steps: int) -> int:
+    """diffrax's default checkpoint count for `max_steps` (equinox's
+    `checkpointed_while_loop`: ⌊−1.5 + √(2 max_steps + ¼)⌋ + 1, at most `max_steps`)."""
+    import math
+
+    return min(max_steps, math.floor(-1.5 + math.sqrt(2 * max_steps + 0.25)) + 1)
+
+
+def gradient_check(scene, base, loss, t_end, grad, fd_steps, n_save: int = 201) -> dict:
+    """The gradient `grad` ({name: value}) against central differences of the same loss,
+    `(L(θ + h e_k) − L(θ − h e_k)) / 2h`, h = rel·|θ_k| for each relative step in
+    `fd_steps`, every perturbed run over the unperturbed run's accepted steps (so both
+    differentiate one discrete map). All runs are one vmapped batch that also saves the
+    state at every step end: where a difference disagrees, the switch flags (`SWITCH_FLAGS`)
+    of the two runs tell whether a contact onset or separation (or a latch) moved across a
+    step end between them — a jump of the discrete map inside [θ − h, θ + h], which a
+    difference sees and a derivative does not."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxdeploy.batch import run_scene, simulate_batch
+
+    names = list(grad)
+    samples = np.linspace(0.0, t_end, n_save)
+    reference = jax.jit(lambda: run_scene(scene, base, t_end, ts=samples, replay_steps=True))()
+    times = np.asarray(reference.step_times)
+    ends = times[np.isfinite(times)]
+    ts = np.concatenate([samples, ends])
+    order = np.argsort(ts, kind="stable")
+    where = np.empty_like(order)
+    where[order] = np.arange(order.size)
+    at_samples, at_ends = where[:n_save], where[n_save:]
+    cases = [dict(base)]
+    for name in names:
+        for rel in fd_steps:
+            h = rel * abs(base[name])
+            cases += [{**base, name: base[name] + h}, {**base, name: base[name] - h}]
+    batch = simulate_batch(scene, cases, t_end, ts=ts[order], replay_steps=times)
+    if not all(batch.ok):
+        raise RuntimeError(f"a perturbed run failed: {[s for s in batch.statuses() if s != 'ok']}")
+    losses, flags = [], []
+    for i in range(batch.size):
+        case = batch.case(i)
+        channels = scene.channels(batch.mechanism(i), case)
+        sampled = {k: np.asarray(v)[at_samples] for k, v in channels.items()}
+        losses.append(float(loss({k: jnp.asarray(v) for k, v in sampled.items()})))
+        flags.append(_switch_flags(case.memory, at_ends))
+    rows = []
+    for k, name in enumerate(names):
+        for j, rel in enumerate(fd_steps):
+            plus, minus = 1 + 2 * (k * len(fd_steps) + j), 2 + 2 * (k * len(fd_steps) + j)
+            h = rel * abs(base[name])
+            fd = (losses[plus] - losses[minus]) / (2 * h)
+            differ = flags[plus] != flags[minus]
+            steps = np.nonzero(differ.any(axis=0))[0]
+            rows.append({
+                "parameter": name, "relative_step": rel, "central_difference": fd,
+                "gradient": grad[name],
+                "relative_error": abs(fd - grad[name]) / abs(grad[name]),
+                "switched_steps": int(steps.size),
+                "first_switch_s": float(ends[steps[0]]) if steps.size else None,
+            })  # fmt: skip
+    smooth = [r["relative_error"] for r in rows if r["switched_steps"] == 0]
+    return {
+        "relative_steps": list(fd_steps),
+        "step_ends": int(ends.size),
+        "rows": rows,
+        "max_relative_error_smooth": max(smooth) if smooth else None,
+        "loss_replayed": losses[0],
+    }
+
+
+def _switch_flags(memory, at) -> np.ndarray:
+    """The `SWITCH_FLAGS` of every element's memory at the saved positions `at`, as a
+    boolean array (flags, len(at))."""
+    rows = []
+    for element in memory or ():
+        if isinstance(element, dict):
+            for key in SWITCH_FLAGS:
+                if key in element and np.ndim(element[key]) == 1:
+                    rows.append(np.asarray(element[key])[at] > 0.5)
+    return np.array(rows, dtype=bool).reshape(len(rows), len(at))
 
 
 def simulate_cold_warm(scene: str = "deploy_array") -> dict:

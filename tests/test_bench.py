@@ -221,10 +221,43 @@ def test_page_renders_every_target_with_its_verdict():
         ),  # fmt: skip
         "gradient": dict(
             t_end_s=0.2,
-            ratio=4.0,
             wrt=["restitution"],
-            gradient={"warm_s": 4.0, "compile_s": 30.0},
+            auto_mode="forward",
+            ratio=4.0,
+            ratio_forward=4.0,
+            ratio_reverse=6.0,
+            replay_ratio=1.7,
+            gradient_forward={"warm_s": 4.0, "compile_s": 30.0},
+            gradient_reverse={"warm_s": 6.0, "compile_s": 60.0},
+            replay={"warm_s": 1.7, "compile_s": 20.0},
             forward={"warm_s": 1.0, "compile_s": 10.0},
+            modes_max_relative_difference=1e-12,
+            steps=dict(accepted=900, rejected=100, max_steps=2000000, checkpoints=1999),
+            central_differences=dict(
+                relative_steps=[1e-3, 1e-7],
+                step_ends=900,
+                max_relative_error_smooth=2e-6,
+                rows=[
+                    dict(
+                        parameter="restitution",
+                        relative_step=1e-3,
+                        central_difference=1.1,
+                        gradient=1.0,
+                        relative_error=0.1,
+                        switched_steps=3,
+                        first_switch_s=0.0123,
+                    ),
+                    dict(
+                        parameter="restitution",
+                        relative_step=1e-7,
+                        central_difference=1.0,
+                        gradient=1.0,
+                        relative_error=2e-6,
+                        switched_steps=0,
+                        first_switch_s=None,
+                    ),
+                ],
+            ),
         ),  # fmt: skip
         "simulate": dict(scene="deploy_array", cold_s=30.0, warm_s=4.0),
     }
@@ -240,6 +273,9 @@ def test_page_renders_every_target_with_its_verdict():
     assert "400 accepted steps against a mean of 320 (1.25×)" in text
     assert 'Saving q and q̇ alone (`outputs="motion"`) takes 50% off the vmap' in text
     assert "| gradient / forward" in text and "missed: 1.3× the goal" in text
+    assert "(forward mode, the choice of `gradient_mode` for 1 parameters)" in text
+    assert "| `restitution` | 0.001 | 1.1 | 1 | 1.0e-01 | 3 (0.0123 s) |" in text
+    assert "Largest disagreement where no step switched: 2.0e-06." in text
     assert "≤ 15 s | missed: 2× the goal" in text and "≤ 5 s | met" in text
     assert "generalized-α step / Exudyn generalized-α (python force) step" in text  # 0.4
     assert "| 0.40 | ≤ 0.3 | missed: 1.3× the goal |" in text
