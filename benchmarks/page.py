@@ -560,6 +560,25 @@ def gradient_section(g) -> list[str]:
         "exceed them, so its backward pass recomputes nothing.",
         "",
     ]
+    r = g.get("rhs")
+    if r:
+        p = r["primal_us"]
+        lines += [
+            "**What bounds it.** Every gradient first pays the run that chooses the steps (the "
+            f"replayed forward run costs {g['replay_ratio']:.2f}× a forward run: the adaptive "
+            "run, then the run over its steps), then a pass over the same steps in which every "
+            "evaluation of the right-hand side carries the derivatives. One evaluation of the "
+            f"accelerations (`Mechanism.accelerations`, {r['coordinates']} coordinates, "
+            f"{r['constraints']} constraints; chained calls in one compiled loop) costs "
+            f"{p:.3g} µs; its JVP with 1 tangent {r['jvp1_us']:.3g} µs "
+            f"({r['jvp1_us'] / p:.1f}×), with 4 tangents (vmapped, as "
+            f"`jax.jacfwd`) {r['jvp4_us']:.3g} µs ({r['jvp4_us'] / p:.1f}×), its VJP "
+            f"{r['vjp_us']:.3g} µs ({r['vjp_us'] / p:.1f}×). Small dense linear algebra costs "
+            "per operation, not per flop, so each tangent costs about one more primal "
+            "evaluation: a gradient within 3× a forward run would need the differentiated pass "
+            "within about 2× the primal pass, which these ratios exclude at this size.",
+            "",
+        ]
     cd = g.get("central_differences")
     if not cd:
         return lines

@@ -248,9 +248,52 @@ def gradient(t_end: float = 0.2, repeats: int = 2, fd_steps=GRADIENT_FD_STEPS) -
         out[f"ratio_{mode}"] = out[f"gradient_{mode}"]["warm_s"] / out["forward"]["warm_s"]
     out["ratio"] = out[f"ratio_{out['auto_mode']}"]
     out["replay_ratio"] = out["replay"]["warm_s"] / out["forward"]["warm_s"]
+    out["rhs"] = rhs_cost(scene, base)
     out["central_differences"] = gradient_check(
         scene, base, loss, t_end, grads[out["auto_mode"]], fd_steps
     )
+    return out
+
+
+def rhs_cost(scene, base, calls: int = 2000) -> dict:
+    """What one evaluation of the accelerations (`Mechanism.accelerations`, the right-hand
+    side every stage of every step evaluates) costs, and its JVP with 1 and with 4 tangents
+    (vmapped, as `jax.jacfwd` carries them) and its VJP, in µs per call: `calls` chained
+    calls in one compiled loop, so dispatch is not counted."""
+    import jax
+    import jax.numpy as jnp
+
+    mechanism = scene.build(base)
+    state = scene.initial_state(base, mechanism)
+    memory = state.memory
+    q0, v0 = jnp.asarray(state.q), jnp.asarray(state.v)
+    tangents = 1e-6 * jax.random.normal(jax.random.PRNGKey(0), (4, q0.size))
+
+    def f(q, v):
+        return mechanism.accelerations(q, v, 0.0, memory)[0]
+
+    def primal(q, d):
+        return q + 1e-12 * f(q, v0), d
+
+    def jvp1(q, d):
+        a, da = jax.jvp(f, (q, v0), (d[0], d[0]))
+        return q + 1e-12 * a, d.at[0].add(1e-12 * da)
+
+    def jvp4(q, d):
+        a, da = jax.vmap(lambda t: jax.jvp(f, (q, v0), (t, t)), out_axes=(None, 0))(d)
+        return q + 1e-12 * a, d + 1e-12 * da
+
+    def vjp(q, d):
+        a, pull = jax.vjp(f, q, v0)
+        gq, _ = pull(d[0])
+        return q + 1e-12 * a, d.at[0].add(1e-12 * gq)
+
+    out = {"coordinates": int(q0.size), "constraints": int(mechanism.n_constraints)}
+    for name, body in (("primal", primal), ("jvp1", jvp1), ("jvp4", jvp4), ("vjp", vjp)):
+        loop = jax.jit(lambda q, d, body=body: jax.lax.fori_loop(
+            0, calls, lambda i, c: body(*c), (q, d)))  # fmt: skip
+        _timed(loop, q0, tangents)
+        out[f"{name}_us"] = 1e6 * min(_timed(loop, q0, tangents)[0] for _ in range(3)) / calls
     return out
 
 

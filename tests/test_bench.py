@@ -232,6 +232,14 @@ def test_page_renders_every_target_with_its_verdict():
             replay={"warm_s": 1.7, "compile_s": 20.0},
             forward={"warm_s": 1.0, "compile_s": 10.0},
             modes_max_relative_difference=1e-12,
+            rhs=dict(
+                coordinates=21,
+                constraints=16,
+                primal_us=10.0,
+                jvp1_us=25.0,
+                jvp4_us=50.0,
+                vjp_us=30.0,
+            ),
             steps=dict(accepted=900, rejected=100, max_steps=2000000, checkpoints=1999),
             central_differences=dict(
                 relative_steps=[1e-3, 1e-7],
@@ -276,6 +284,7 @@ def test_page_renders_every_target_with_its_verdict():
     assert "(forward mode, the choice of `gradient_mode` for 1 parameters)" in text
     assert "| `restitution` | 0.001 | 1.1 | 1 | 1.0e-01 | 3 (0.0123 s) |" in text
     assert "Largest disagreement where no step switched: 2.0e-06." in text
+    assert "with 4 tangents (vmapped, as `jax.jacfwd`) 50 µs (5.0×)" in text
     assert "≤ 15 s | missed: 2× the goal" in text and "≤ 5 s | met" in text
     assert "generalized-α step / Exudyn generalized-α (python force) step" in text  # 0.4
     assert "| 0.40 | ≤ 0.3 | missed: 1.3× the goal |" in text
