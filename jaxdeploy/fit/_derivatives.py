@@ -26,11 +26,12 @@ from collections.abc import Callable, Mapping, Sequence
 MODES = ("reverse", "forward")
 GRADIENT_MODES = ("auto", *MODES)
 # The largest parameter count for which `mode="auto"` takes forward mode (`gradient_mode`).
-# Measured (benchmarks/targets.py, deploy_array loss over 0.2 s, one core): with 4 parameters
-# forward mode took 0.65x the CPU time of reverse mode and compiled in 0.45x the time; each
-# further tangent adds about one right-hand-side evaluation per stage (the tangents are
-# vmapped: 4 cost 5.7x a primal evaluation, 1 cost 2.8x), about 15 % of the 4-parameter
-# forward-mode cost, so the two cross near 7 parameters.
+# Measured (benchmarks/targets.py, deploy_array loss over 0.2 s, pinned to one core, load
+# 1.4-1.8): with 4 parameters forward mode took 0.80x the warm time of reverse mode (0.59 s vs
+# 0.74 s) and compiled in 0.42x the time (34 s vs 80 s). Each further tangent adds about one
+# primal right-hand-side evaluation per stage (vmapped tangents: 1 cost 2.6x a primal
+# evaluation, 4 cost 5.4x), about 0.1 s here, so the warm costs cross near 5-6 parameters;
+# the smaller compile tips the choice to forward mode at 6.
 FORWARD_MODE_MAX_PARAMETERS = 6
 
 
