@@ -210,7 +210,8 @@ def breakdown_lines(bd) -> list[str]:
         f"({bd['per_saved_time_s'] * 1e6:.2f} µs each), {cpu['horizon_2us'] * 1e3:.1f} ms per "
         "call besides (argument checks, dispatch, results; a 2 µs run). A step is six Tsit5 "
         "stages (each an index-1 acceleration solve: contact forces, then a 7×7 Cholesky "
-        "factorisation and two triangular solves through LAPACK), the projection, the "
+        "factorisation and two triangular solves, LAPACK's or written as array operations as "
+        "`saddle_point.UNROLLED_MAX_SIZE` chooses), the projection, the "
         "step-end accelerations, event location and the extremes, executed by XLA's CPU "
         "runtime as a loop of small operations" + _operations_text(bd) + ".",
         "",

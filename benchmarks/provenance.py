@@ -19,9 +19,11 @@ PATTERN = re.compile(r"<!-- provenance (\{.*?\}) -->")
 
 
 def git(*args: str, root: str = ".") -> str:
+    """git's output without its trailing newline (leading blanks kept: `status --porcelain`
+    puts the status in the first two columns)."""
     return subprocess.run(
         ["git", *args], cwd=root, capture_output=True, text=True, check=True
-    ).stdout.strip()
+    ).stdout.rstrip()
 
 
 def tree_state(root: str = ".") -> tuple[str, bool]:
