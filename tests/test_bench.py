@@ -175,6 +175,26 @@ def test_dirty_tree_is_refused(tmp_path):
     assert record["dirty"] is True
 
 
+def test_changed_pages_alone_leave_the_tree_clean(tmp_path):
+    """A tree whose only changes are under docs/ (a page just written, the README tour run
+    after it) is clean, also when a docs/ file is the first line of `git status`."""
+
+    def git(*args):
+        subprocess.run(["git", *args], cwd=tmp_path, check=True, capture_output=True)
+
+    git("init", "-q")
+    (tmp_path / "docs").mkdir()
+    for name in ("docs/a.md", "docs/b.md", "z.py"):
+        (tmp_path / name).write_text("1\n")
+    git("add", ".")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "one")
+    (tmp_path / "docs" / "a.md").write_text("2\n")
+    (tmp_path / "docs" / "b.md").write_text("2\n")
+    assert provenance.tree_state(str(tmp_path))[1] is False
+    (tmp_path / "z.py").write_text("2\n")
+    assert provenance.tree_state(str(tmp_path))[1] is True
+
+
 def test_page_renders_every_target_with_its_verdict():
     rows = [
         _row("jaxdeploy", 1e-6, 0.2, 5.0, "jaxdeploy generalized-α fixed", "h=1e-06 s", 4000),
