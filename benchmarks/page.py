@@ -45,9 +45,13 @@ def _f(x, fmt=".3g"):
 def _verdict(value, goal, smaller_is_better=True):
     if value is None or math.isnan(value):
         return "not measured"
-    if smaller_is_better:
-        return "met" if value <= goal else f"missed: {value / goal:.2g}× the goal"
-    return "met" if value >= goal else f"missed: {goal / value:.2g}× short"
+    met = value <= goal if smaller_is_better else value >= goal
+    if met:
+        return "met"
+    factor = value / goal if smaller_is_better else goal / value
+    if f"{factor:.2g}" == "1":  # "1× the goal" would read as met: say by how much
+        return f"missed by {100 * (factor - 1):.1g} %"
+    return f"missed: {factor:.2g}× " + ("the goal" if smaller_is_better else "short")
 
 
 def work_precision_targets(rows):

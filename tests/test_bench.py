@@ -67,6 +67,8 @@ def test_best_at_levels_and_target_ratios():
     assert page._verdict(0.4, 0.5) == "met"
     assert page._verdict(1.0, 0.5) == "missed: 2× the goal"
     assert page._verdict(1.5, 3.0, smaller_is_better=False) == "missed: 2× short"
+    assert page._verdict(0.3012, 0.3) == "missed by 0.4 %"  # not "1× the goal"
+    assert page._verdict(2.97, 3.0, smaller_is_better=False) == "missed by 1 %"
 
 
 def test_timed_calls_takes_the_fastest_of_enough_warm_calls():
