@@ -407,6 +407,7 @@ def optimize(
     optimizer=None,
     smoothing: Scatter | None = None,
     callback: Callable | None = None,
+    mode: str = "reverse",
 ) -> OptimizeResult:
     """Minimise over the box `bounds` from `x0` by gradient steps in the reparametrised u
     (module docstring), with optax.
@@ -423,6 +424,11 @@ def optimize(
     - `steps`: number of objective/gradient evaluations.
     - `optimizer`: an optax `GradientTransformation` (default `optax.adam(learning_rate)`).
     - `callback(i, result)`: called after each evaluation (progress display).
+    - `mode`: how a pathwise gradient (`smoothing=None`) is taken: `"reverse"`
+      (`jax.value_and_grad`; the loss's runs need a reverse-capable adjoint, diffrax's
+      default) or `"forward"` (`jax.jacfwd`, one tangent per parameter; the loss's runs may
+      use `diffrax.ForwardMode()`, which reverse mode cannot differentiate).
+      `jaxdeploy.fit.gradient_mode` gives the cheaper one for a parameter count.
 
     **Returns:** `OptimizeResult`; `.optimum` is the best successful iterate (lowest J),
     `.status` "ok" or, when an iteration's simulation, J or gradient is not finite, a message
@@ -448,7 +454,9 @@ def optimize(
             value, parts, ok = out
             return value, (parts, ok)
 
-        value_and_grad = jax.jit(jax.value_and_grad(reduced, has_aux=True))
+        if mode not in ("reverse", "forward"):
+            raise ValueError(f"mode = {mode!r} is invalid; valid: reverse, forward")
+        value_and_grad = jax.jit(_value_and_grad(reduced, mode))
     else:
         unknown = [n for n in smoothing.names if n not in (*box.names, *smoothing.nominal)]
         if unknown:
@@ -501,3 +509,21 @@ def optimize(
         updates, state = optimizer.update(jnp.asarray(grad_u), state, u)
         u = optax.apply_updates(u, updates)
     return result
+
+
+def _value_and_grad(reduced: Callable, mode: str) -> Callable:
+    """`u ↦ ((J, aux), ∂J/∂u)` of `reduced(u) = (J, aux)` by reverse or forward mode."""
+    if mode == "reverse":
+        return jax.value_and_grad(reduced, has_aux=True)
+
+    def value_as_aux(u):
+        value, aux = reduced(u)
+        return value, (value, aux)
+
+    jacobian = jax.jacfwd(value_as_aux, has_aux=True)
+
+    def forward(u):
+        grad, out = jacobian(u)
+        return out, grad
+
+    return forward

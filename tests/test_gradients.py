@@ -304,3 +304,37 @@ def test_gradient_function_forward_equals_reverse_to_roundoff():
     g, x0 = gradient_function(scene, base, wrt, output, t_end, mode="forward", ts=ts)
     with pytest.raises(ValueError, match="scalar"):
         jax.jit(g)(x0)
+
+
+@pytest.mark.slow  # ~45 s CPU: one compile of the 5-run batch
+def test_central_differences_at_a_zero_parameter_take_an_absolute_one_sided_step():
+    """σ = 0 (its lower bound, Hertz's law) used to give NaN (a relative step of 0): it now
+    takes the absolute step rel_step × its range's width, one-sided (σ − h is invalid), and
+    the other parameters keep their central differences."""
+    from jaxdeploy.fit._derivatives import _stencil, difference_steps
+
+    scene, base, _, t_end, ts, _ = _impact_case()
+    base = {**base, "sigma": 0.0}
+    steps = difference_steps(scene, base, ["sigma", "clearance"], 1e-3)
+    assert steps == pytest.approx({"sigma": 1e-3 * 1e-4, "clearance": 1e-3 * 2e-5})
+    assert [o for o, _ in _stencil(scene, "sigma", 0.0, steps["sigma"])] == [0, 1, 2]
+    assert [o for o, _ in _stencil(scene, "clearance", 2e-5, steps["clearance"])] == [1, -1]
+    with pytest.raises(ValueError, match="material_damping = 0 .* unbounded"):
+        difference_steps(scene, {**base, "material_damping": 0.0}, ["material_damping"], 1e-3)
+
+    def output(ch):
+        return ch["journal_x"][-1]
+
+    control = {**FIXED, "dt": 5e-7}
+    fd = {
+        h: fit_central_differences(
+            scene, base, ["sigma", "clearance"], output, t_end, h, ts=ts, control=control
+        )
+        for h in (1e-3, 1e-4)
+    }
+    assert all(np.isfinite(v) for d in fd.values() for v in d.values())
+    # Smooth in c: second-order differences at two steps agree (measured 1.9e-5 relative).
+    assert fd[1e-4]["clearance"] == pytest.approx(fd[1e-3]["clearance"], rel=1e-4)
+    # A rougher surface is softer at first touch: the journal ends further out (−2.1e-5 and
+    # −1.3e-5 m/m: the rough law is not smooth at σ = 0, so the one-sided slope varies with h).
+    assert fd[1e-3]["sigma"] < 0 and fd[1e-4]["sigma"] < 0

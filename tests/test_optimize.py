@@ -263,3 +263,34 @@ def test_design_problem_batch_equals_single_runs():
         value, parts, ok = problem.evaluate({"panel2_ra": ra})
         assert bool(ok)
         assert batch["objective"][i] == pytest.approx(float(value), rel=1e-9)
+
+
+def test_forward_mode_optimizes_a_loss_whose_runs_only_forward_mode_can_differentiate():
+    """`mode="forward"`: a loss whose runs use `diffrax.ForwardMode()` (reverse mode raises
+    "Reverse-mode differentiation does not work for lax.while_loop" on it, the crash of
+    `jaxdeploy optimize --gradient pathwise` before) gets the same gradient as reverse mode
+    of the same loss with diffrax's default adjoint."""
+    import diffrax as dfx
+
+    scene = Pendulum()
+    base = scene.resolve_params({"initial_angle": -0.4})
+
+    def loss_with(adjoint):
+        options = {} if adjoint is None else {"adjoint": adjoint}
+
+        def loss(x):
+            q = run_scene(scene, {**base, **x}, 0.3, n_save=16, **options).q[:, 2]
+            return jnp.mean(q**2)
+
+        return loss
+
+    bounds = {"length": (0.5, 3.0)}
+    forward = optimize(
+        loss_with(dfx.ForwardMode()), {"length": 2.2}, bounds, steps=2, mode="forward"
+    )
+    reverse = optimize(loss_with(None), {"length": 2.2}, bounds, steps=2)
+    assert forward.status == "ok"
+    for a, b in zip(forward.gradient, reverse.gradient, strict=True):
+        assert a["length"] == pytest.approx(b["length"], rel=1e-9)
+    with pytest.raises(ValueError, match="mode = 'sideways' is invalid"):
+        optimize(loss_with(None), {"length": 2.2}, bounds, steps=1, mode="sideways")

@@ -75,7 +75,7 @@ def add_arguments(parser) -> None:
         choices=("smoothed", "pathwise"),
         default="smoothed",
         help="smoothed: Stein estimate on a Gaussian smoothing (robust to chatter); "
-        "pathwise: forward-mode AD through the solver",
+        "pathwise: AD through the solver (forward mode up to 6 parameters, reverse above)",
     )
     # deploy_array's objectives are rough below about half a unit of ln Ra (contact events
     # shift with the design): smoothing at s = 0.1 follows that roughness, at 0.5 the trend
@@ -211,10 +211,14 @@ def _optimize(args, scene, objective, bounds, fixed, x0, control, out, began) ->
 
     import diffrax as dfx
 
+    from ..fit import gradient_mode
     from ..io import atomic_write_json, prepare_output_dir, run_metadata
     from ..optimize import BatchObjective, DesignProblem, Scatter, optimize
 
     pathwise = args.gradient == "pathwise" and not args.robust
+    # Forward mode up to fit's parameter count (its runs use diffrax.ForwardMode, which
+    # reverse mode cannot differentiate), reverse mode with checkpoints above.
+    mode = gradient_mode(len(bounds))
     try:
         problem = DesignProblem(
             scene,
@@ -223,7 +227,7 @@ def _optimize(args, scene, objective, bounds, fixed, x0, control, out, began) ->
             n_save=args.n_save,
             fixed=fixed,
             control=control,
-            adjoint=dfx.ForwardMode() if pathwise else None,
+            adjoint=dfx.ForwardMode() if pathwise and mode == "forward" else None,
         )
     except (RuntimeError, ValueError) as err:  # the ideal reference failed or did not lock
         print(f"error: {err}", file=sys.stderr)
@@ -267,6 +271,7 @@ def _optimize(args, scene, objective, bounds, fixed, x0, control, out, began) ->
         learning_rate=args.learning_rate,
         smoothing=smoothing,
         callback=progress,
+        mode=mode,
     )
     record = {
         "scene": args.scene,

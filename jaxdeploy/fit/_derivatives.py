@@ -190,11 +190,19 @@ def central_differences(
     n_save: int = 1001,
     control: Mapping | None = None,
     replay: bool = True,
+    abs_step=None,
     **simulate_options,
 ) -> dict:
     """`{name: (f(θ + h e_k) − f(θ − h e_k)) / 2h}`, `h = rel_step·|θ_k|` (`rel_step` one
-    number or `{name: step}`), all 2p runs as one vmapped batch; `output` as in
+    number or `{name: step}`), all runs as one vmapped batch; `output` as in
     `output_function`.
+
+    A parameter whose value is 0 (slider_crank's default σ and μ) has no relative step: it
+    takes the absolute step `abs_step` (one number or `{name: step}`, in the parameter's
+    unit; default `rel_step` times the width of its valid range, `ParamSpec.low`…`high`, and
+    a `ValueError` naming it when that range is unbounded). Where `θ − h` leaves the valid
+    range (a parameter at its lower bound, σ = 0) the difference is one-sided, of the same
+    order: `(−3 f(θ) + 4 f(θ + h) − f(θ + 2h)) / 2h` (Fornberg, *Math. Comp.* 51 (1988) 699).
 
     With adaptive steps and `replay=True` (default) every perturbed run integrates over the
     accepted steps of the unperturbed run (`simulate(..., replay_steps=times)`): the
@@ -208,7 +216,6 @@ def central_differences(
     from ..batch import run_scene, simulate_batch, step_control
 
     base = scene.resolve_params(params)
-    steps = rel_step if isinstance(rel_step, Mapping) else dict.fromkeys(wrt, rel_step)
     if replay and _adaptive(step_control(scene, control)):
         reference = jax.jit(
             lambda: run_scene(
@@ -219,10 +226,11 @@ def central_differences(
         if not reference.ok:
             raise RuntimeError(f"the unperturbed run failed: {reference.status()}")
         simulate_options = {**simulate_options, "replay_steps": np.asarray(reference.step_times)}
-    cases = []
-    for name in wrt:
-        h = steps[name] * abs(base[name])
-        cases += [{**base, name: base[name] + h}, {**base, name: base[name] - h}]
+    widths = difference_steps(scene, base, wrt, rel_step, abs_step)
+    stencils = {name: _stencil(scene, name, base[name], widths[name]) for name in wrt}
+    cases = [
+        {**base, name: base[name] + o * widths[name]} for name in wrt for o, _ in stencils[name]
+    ]
     batch = simulate_batch(
         scene, cases, t_end, ts=ts, n_save=n_save, control=control, **simulate_options
     )
@@ -233,7 +241,49 @@ def central_differences(
         np.asarray(output(scene.channels(batch.mechanism(i), batch.case(i))))
         for i in range(batch.size)
     ]
-    return {
-        name: (values[2 * k] - values[2 * k + 1]) / (2 * steps[name] * abs(base[name]))
-        for k, name in enumerate(wrt)
-    }
+    out, i = {}, 0
+    for name in wrt:
+        weights = [w for _, w in stencils[name]]
+        out[name] = sum(w * v for w, v in zip(weights, values[i : i + len(weights)], strict=True))
+        out[name] = out[name] / widths[name]
+        i += len(weights)
+    return out
+
+
+def difference_steps(scene, params: Mapping, wrt: Sequence[str], rel_step, abs_step=None) -> dict:
+    """`{name: h}`, the finite-difference step of each parameter in its unit: `rel_step·|θ|`,
+    or for θ = 0 the absolute step (`central_differences`)."""
+    import math
+
+    rel = rel_step if isinstance(rel_step, Mapping) else dict.fromkeys(wrt, rel_step)
+    out = {}
+    for name in wrt:
+        value = float(params[name])
+        if value != 0.0:
+            out[name] = float(rel[name]) * abs(value)
+            continue
+        given = abs_step.get(name) if isinstance(abs_step, Mapping) else abs_step
+        if given is None:
+            spec = scene.params[name]
+            width = spec.high - spec.low
+            if not math.isfinite(width):
+                raise ValueError(
+                    f"{name} = 0 has no relative step and its range is unbounded: give "
+                    f"abs_step for it (in {spec.unit or 'its unit'})"
+                )
+            given = float(rel[name]) * width
+        if not (math.isfinite(given) and given > 0):
+            raise ValueError(f"abs_step for {name} = {given!r} is invalid: it must be > 0")
+        out[name] = float(given)
+    return out
+
+
+def _stencil(scene, name: str, value: float, h: float) -> list[tuple[int, float]]:
+    """`[(offset in steps, weight)]` of the second-order difference of `name` at `value`:
+    central, or one-sided where `value ∓ h` leaves the parameter's range."""
+    spec = scene.params[name]
+    if value - h < spec.low or (value - h == spec.low and not spec.low_inclusive):
+        return [(0, -1.5), (1, 2.0), (2, -0.5)]
+    if value + h > spec.high or (value + h == spec.high and not spec.high_inclusive):
+        return [(0, 1.5), (-1, -2.0), (-2, 0.5)]
+    return [(1, 0.5), (-1, -0.5)]
