@@ -1,5 +1,6 @@
 # One command each (see README): `make demo` runs the main job, `make test` the tests,
-# `make bench` regenerates every performance page (docs/performance.md, docs/bench/).
+# `make bench` regenerates every performance page (docs/performance.md, docs/bench/), `make
+# pages` every generated docs page (docs/pages.md; hours: `make pages-quick` the cheap ones).
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -10,7 +11,7 @@ $(BIN)/activate: pyproject.toml
 	$(BIN)/pip install --quiet -e ".[test]"
 	touch $(BIN)/activate
 
-.PHONY: demo test lint bench
+.PHONY: demo test lint bench pages pages-quick
 demo: $(BIN)/activate
 	$(BIN)/jaxdeploy simulate --out results/demo --overwrite
 
@@ -27,3 +28,11 @@ $(VENV)/.bench-extra: pyproject.toml $(BIN)/activate
 
 bench: $(VENV)/.bench-extra
 	$(BIN)/python -m benchmarks all
+
+# Every generated page, in order, on committed code (tools/pages.py lists them with their
+# measured cost; each refuses a dirty tree). Includes `make bench`'s pages.
+pages: $(VENV)/.bench-extra
+	$(BIN)/python -m tools.pages
+
+pages-quick: $(VENV)/.bench-extra
+	$(BIN)/python -m tools.pages --quick

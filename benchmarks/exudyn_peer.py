@@ -66,7 +66,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-VELOCITY_FLOOR = 1e-4  # m/s, as jaxdeploy.contact.damping.VELOCITY_FLOOR
+VELOCITY_FLOOR = 1e-4  # m/s, as jaxdeploy.contact.damping.DEFAULT_IMPACT_VELOCITY_FLOOR
 ECCENTRICITY_SMOOTHING = 1e-12  # m, as RevoluteClearance.eccentricity_smoothing
 
 

@@ -1,4 +1,5 @@
-"""What a generated performance page records about how it was made, and reading it back.
+"""What a generated performance page records about how it was made (the shared form of every
+generated page: `jaxdeploy.pages`), with the benchmark machine's description.
 
 A page carries one machine-readable line, `<!-- provenance {json} -->`, with the commit the
 numbers were measured at (`git rev-parse HEAD`) and whether the tree was dirty, the machine
@@ -9,30 +10,11 @@ fails when one of those paths changed in a commit after the recorded one.
 
 from __future__ import annotations
 
-import json
 import os
 import platform
-import re
-import subprocess
 
-PATTERN = re.compile(r"<!-- provenance (\{.*?\}) -->")
-
-
-def git(*args: str, root: str = ".") -> str:
-    """git's output without its trailing newline (leading blanks kept: `status --porcelain`
-    puts the status in the first two columns)."""
-    return subprocess.run(
-        ["git", *args], cwd=root, capture_output=True, text=True, check=True
-    ).stdout.rstrip()
-
-
-def tree_state(root: str = ".") -> tuple[str, bool]:
-    """`(commit, dirty)`: HEAD, and whether tracked files differ from it (untracked files
-    and the generated pages' own folder, docs/, do not count)."""
-    commit = git("rev-parse", "HEAD", root=root)
-    changed = git("status", "--porcelain", "--untracked-files=no", root=root).splitlines()
-    dirty = any(not line[3:].startswith("docs/") for line in changed)
-    return commit, dirty
+from jaxdeploy.pages import PATTERN, git, read, tree_state  # noqa: F401  (the shared helper)
+from jaxdeploy.pages import comment as page_comment
 
 
 def cpu_model() -> str:
@@ -71,6 +53,7 @@ def start(measures: list[str], *, allow_dirty: bool = False, root: str = ".") ->
     return {
         "commit": commit,
         "dirty": dirty,
+        "command": "make bench",
         "machine": machine_description(),
         "load_start_1min": os.getloadavg()[0],
         "measures": sorted(measures),
@@ -92,12 +75,6 @@ def header(record: dict, command: str) -> str:
             f"{record['load_start_1min']:.1f} at the start and {record['load_end_1min']:.1f} at "
             "the end. Measures: " + ", ".join(f"`{p}`" for p in record["measures"]) + ".",
             "",
-            f"<!-- provenance {json.dumps(record, sort_keys=True)} -->",
+            page_comment(record),
         ]
     )
-
-
-def read(text: str) -> dict | None:
-    """The provenance recorded in a page's text, or None."""
-    found = PATTERN.search(text)
-    return json.loads(found.group(1)) if found else None

@@ -183,8 +183,7 @@ def rewrite(readme: str, blocks: list[dict], record: dict) -> str:
         f"`{record['commit'][:12]}` on {m['cpu_model']} ({m['cpu_count']} cores), load average "
         f"{record['load_start_1min']:.1f} at the start and {record['load_end_1min']:.1f} at the "
         "end, from an empty compilation cache, in this order; CPU is user + system time of the "
-        "command's processes.\n\n"
-        f"<!-- provenance {json.dumps(record, sort_keys=True)} -->"
+        "command's processes.\n\n" + provenance.page_comment(record)
     )
     stamp_pattern = re.compile(r"^Times: .*?<!-- provenance \{.*?\} -->", flags=re.M | re.S)
     if not stamp_pattern.search(tour):

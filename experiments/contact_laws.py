@@ -7,6 +7,8 @@ Writes into docs/figures/:
 * contact_friction.png     the friction laws' F_T/(μ F_N) against sliding speed;
 * contact_damping.png      force–penetration hysteresis of the damped laws in a one-body impact;
 
+and the block `contact-laws-figures` of docs/contact.md that records which commit made them.
+
 Run: .venv/bin/python experiments/contact_laws.py
 """
 
@@ -24,8 +26,12 @@ import numpy as np  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 import jaxdeploy.contact as contact  # noqa: E402
+from jaxdeploy import pages  # noqa: E402
 
 OUT = pathlib.Path(__file__).resolve().parents[1] / "docs" / "figures"
+DOC = OUT.parent / "contact.md"
+# What moves the figures: the contact laws only (the damped impact is integrated by scipy).
+MEASURES = ["experiments/contact_laws.py", "jaxdeploy/contact"]
 STEEL = dict(E_journal=207e9, nu_journal=0.3, E_bearing=207e9, nu_bearing=0.3)
 RADIUS, CLEARANCE = 5e-3, 5e-5
 ROUGHNESS = (0.8e-6, 1.6e-6, 3.2e-6)
@@ -147,11 +153,18 @@ def damping_figure(stiffness, mass=0.2, v0=0.1):
 
 
 def main():
+    record = pages.start(MEASURES, "python experiments/contact_laws.py")
     OUT.mkdir(parents=True, exist_ok=True)
     stiffness = contact.journal_bearing_stiffness(RADIUS, CLEARANCE, **STEEL)
     elastic_figure(stiffness)
     friction_figure()
     damping_figure(stiffness)
+    text = (
+        "The figures of this page (`contact_elastic.png`, `contact_friction.png`, "
+        "`contact_damping.png` in docs/figures/): steel hinge pin R_j = "
+        f"{RADIUS * 1e3:g} mm, c = {CLEARANCE * 1e3:g} mm, K = {float(stiffness):.4g} N/m^1.5."
+    )
+    pages.write_block(str(DOC), "contact-laws-figures", text, record)
     print(f"wrote figures to {OUT}")
 
 

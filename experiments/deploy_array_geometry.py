@@ -46,6 +46,8 @@ from matplotlib.patches import Rectangle  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 from scipy.interpolate import CubicSpline  # noqa: E402
 
+from jaxdeploy import pages  # noqa: E402  (only to record the commit: no model code)
+
 ROOT = Path(__file__).resolve().parents[1]
 JSON_PATH = ROOT / "jaxdeploy" / "scenes" / "data" / "deploy_array_geometry.json"
 FIG_DIR = ROOT / "docs" / "figures"
@@ -949,7 +951,12 @@ def print_report(sw, dep, latch, hz, robust) -> None:
     print(line)
 
 
+# What moves the numbers: this script alone (it uses none of jaxdeploy's model).
+MEASURES = ["experiments/deploy_array_geometry.py"]
+
+
 def main() -> None:
+    record = pages.start(MEASURES, "python experiments/deploy_array_geometry.py")
     FIG_DIR.mkdir(parents=True, exist_ok=True)
     # Sanity: Gruebler count and consistency of the designed deployed pose.
     assert 3 * NB - 2 * len(JOINTS) == 1
@@ -970,6 +977,11 @@ def main() -> None:
     plot_conditioning(sw, FIG_DIR / "deploy_array_geometry_conditioning.png")
     plot_deployment(dep, FIG_DIR / "deploy_array_geometry_deployment.png")
     write_json(sw, dep, latch, hz, robust, JSON_PATH)
+    text = (
+        f"Made the figures `docs/figures/deploy_array_geometry_*.png` and "
+        f"`{JSON_PATH.relative_to(ROOT)}`; the table below is its printed report."
+    )
+    pages.write_block(str(ROOT / "docs" / "deploy_array_geometry.md"), "geometry", text, record)
     print(f"wrote {JSON_PATH.relative_to(ROOT)} and 3 figures in {FIG_DIR.relative_to(ROOT)}")
 
 

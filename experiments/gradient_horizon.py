@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import matplotlib
 import numpy as np
 
-from jaxdeploy.io import replace_block
+from jaxdeploy import pages
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -52,7 +52,24 @@ STEPS = [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8]
 EDGES = [0.0, 0.01, 0.025, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.55, 0.6, 0.7, 1.0, 1.5, 2.0]
 
 
+# What moves the numbers: deploy_array's simulation and its derivatives.
+MEASURES = [
+    "jaxdeploy/analysis/deploy_array.py",
+    "jaxdeploy/batch.py",
+    "jaxdeploy/contact",
+    "jaxdeploy/mechanism",
+    "jaxdeploy/scenes/_contact.py",
+    "jaxdeploy/scenes/base.py",
+    "jaxdeploy/scenes/data",
+    "jaxdeploy/scenes/deploy_array.py",
+    "jaxdeploy/simulation.py",
+    "jaxdeploy/solvers",
+    "experiments/gradient_horizon.py",
+]
+
+
 def main(argv=None):
+    record = pages.start(MEASURES, "python experiments/gradient_horizon.py")
     parser = argparse.ArgumentParser()
     parser.add_argument("--t-end", type=float, default=0.7)
     parser.add_argument("--n-save", type=int, default=281)
@@ -157,7 +174,7 @@ def main(argv=None):
         return "stop" if x is None else f"{x:.1g}"
 
     lines = [
-        f"`experiments/gradient_horizon.py` at commit {_commit()}: default deploy_array run "
+        "default deploy_array run "
         f"to {t_end:g} s "
         f"({n_steps} accepted adaptive steps, replayed; latch locks at "
         f"{lock if lock is None else f'{lock:.3f}'} s). For each window: the largest "
@@ -182,18 +199,8 @@ def main(argv=None):
                     + f" | {e['linear_range']:g} |"
                 )
     lines += ["", "![derivative size over the horizon](figures/gradient_horizon.png)"]
-    replace_block(
-        os.path.join(ROOT, "docs/identification.md"), "gradient_horizon", "\n".join(lines)
-    )
-
-
-def _commit() -> str:
-    """The checkout's commit (the page says which commit made its numbers)."""
-    import subprocess
-
-    done = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                          text=True, cwd=ROOT, check=True)  # fmt: skip
-    return done.stdout.strip()
+    doc = os.path.join(ROOT, "docs/identification.md")
+    pages.write_block(doc, "gradient_horizon", "\n".join(lines), record)
 
 
 if __name__ == "__main__":

@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import matplotlib
 import numpy as np
 
-from jaxdeploy.io import replace_block
+from jaxdeploy import pages
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -55,7 +55,23 @@ WINDOWS = [(0.0, 0.1), (0.1, 0.3), (0.3, 0.5), (0.5, 1.0), (1.0, 2.0)]
 STEPS = [1e-2, 1e-3]
 
 
+# What moves the numbers: deploy_array's simulation and its derivatives.
+MEASURES = [
+    "jaxdeploy/batch.py",
+    "jaxdeploy/contact",
+    "jaxdeploy/mechanism",
+    "jaxdeploy/scenes/_contact.py",
+    "jaxdeploy/scenes/base.py",
+    "jaxdeploy/scenes/data",
+    "jaxdeploy/scenes/deploy_array.py",
+    "jaxdeploy/simulation.py",
+    "jaxdeploy/solvers",
+    "experiments/gradient_sensitivity.py",
+]
+
+
 def main():
+    record = pages.start(MEASURES, "python experiments/gradient_sensitivity.py")
     scene = DeployArray()
     base = scene.resolve_params()
     ts = jnp.linspace(0.0, T_END, N)
@@ -129,7 +145,7 @@ def main():
     fig.savefig(os.path.join(ROOT, "docs/figures/gradient_sensitivity.png"), dpi=110)
 
     lines = [
-        f"`experiments/gradient_sensitivity.py` at commit {_commit()}: d y(t)/d `{PARAM}` on "
+        "d y(t)/d `{PARAM}` on "
         "the default 2 s "
         "deploy_array run (rtol 1e-6). Columns: ‖AD − FD‖/‖FD‖ for central differences with "
         "steps 1e-2 c and 1e-3 c, pointwise and for 0.05 s block means; noise ratio = "
@@ -150,18 +166,8 @@ def main():
                 f"{e['noise_ratio_block']:.2g} |"
             )
     lines += ["", "![AD and FD sensitivities](figures/gradient_sensitivity.png)"]
-    replace_block(
-        os.path.join(ROOT, "docs/identification.md"), "gradient_sensitivity", "\n".join(lines)
-    )
-
-
-def _commit() -> str:
-    """The checkout's commit (the page says which commit made its numbers)."""
-    import subprocess
-
-    done = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                          text=True, cwd=ROOT, check=True)  # fmt: skip
-    return done.stdout.strip()
+    doc = os.path.join(ROOT, "docs/identification.md")
+    pages.write_block(doc, "gradient_sensitivity", "\n".join(lines), record)
 
 
 if __name__ == "__main__":

@@ -31,6 +31,7 @@ import time
 
 import numpy as np
 
+from jaxdeploy import pages
 from jaxdeploy.analysis.deploy_array import SPECTRUM_SEGMENT, lock_time
 from jaxdeploy.analysis.spectra import (
     amplitude_spectrum,
@@ -92,12 +93,32 @@ RUNS = (
 REFERENCE = "dopri8_10"
 
 
-def run_all(scene_params=None):
-    """Every run of RUNS and the ideal mechanism, cached as npz (panel columns only)."""
+# What moves the numbers: deploy_array's runs under both solvers and the spectral estimate.
+MEASURES = [
+    "experiments/spectral_peak.py",
+    "jaxdeploy/analysis/deploy_array.py",
+    "jaxdeploy/analysis/spectra.py",
+    "jaxdeploy/contact",
+    "jaxdeploy/mechanism",
+    "jaxdeploy/scenes/_contact.py",
+    "jaxdeploy/scenes/base.py",
+    "jaxdeploy/scenes/data",
+    "jaxdeploy/scenes/deploy_array.py",
+    "jaxdeploy/simulation.py",
+    "jaxdeploy/solvers",
+]
+
+
+def run_all(commit, rerun=False):
+    """Every run of RUNS and the ideal mechanism, cached as npz (panel columns only) with the
+    commit that ran it; the commits of runs kept from the cache (`rerun` redoes them)."""
     os.makedirs(CACHE, exist_ok=True)
+    kept = set()
     for key, label, control in (*RUNS, ("ideal", "ideal joints, Tsit5", None)):
         path = os.path.join(CACHE, f"{key}.npz")
-        if os.path.exists(path):
+        if os.path.exists(path) and not rerun:
+            with np.load(path) as cached:
+                kept.add(str(cached["commit"]) if "commit" in cached.files else "unknown")
             continue
         scene = DeployArray(ideal=key == "ideal")
         params = scene.resolve_params()
@@ -118,8 +139,10 @@ def run_all(scene_params=None):
             steps=int(tr.stats["num_accepted_steps"]),
             wall=wall,
             status=tr.status(),
+            commit=commit,
         )
         print(f"{label}: {tr.status()}, {int(tr.stats['num_accepted_steps'])} steps", flush=True)
+    return kept - {commit}
 
 
 def load(key):
@@ -308,8 +331,6 @@ def write_doc(result):
         )
     machine = result["machine"]
     where = f"{machine.get('Model name', machine['platform'])}, {machine.get('CPU(s)', '?')} CPUs"
-    git = result["versions"].get("git") or {}
-    commit = git.get("commit", "?")[:10] + (" (uncommitted changes)" if git.get("dirty") else "")
     res_hz = 1.0 / SPECTRUM_SEGMENT
 
     def table(panel):
@@ -418,8 +439,7 @@ def write_doc(result):
     )
     text = f"""# deploy_array: one scene, two solvers, one spectral peak (generated)
 
-*Written by `PYTHONPATH=. python experiments/spectral_peak.py` at commit {commit}; rerun it to
-regenerate (runs cached in results/spectral_peak/). {where}. Issue 19 item 7.*
+*Runs cached in results/spectral_peak/ (`--rerun` redoes them). {where}. Issue 19 item 7.*
 
 `jaxdeploy simulate deploy_array` reports `panel{{1,2}}_peak_freq_hz`, the post-lock spectral
 peak of each panel centre's Y acceleration. With the scene's default step control the
@@ -514,21 +534,26 @@ agree within the resolution).
 
 ![spectra](figures/spectral_peak.png)
 """
-    atomic_write_bytes(DOC, text.encode())
+    atomic_write_bytes(DOC, pages.whole_page(text, result["provenance"]).encode())
     print(f"wrote {DOC}")
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--doc-only", action="store_true", help="rewrite the page from the cache")
+    ap.add_argument("--rerun", action="store_true", help="redo the runs kept in the cache")
     args = ap.parse_args(argv)
     result_path = os.path.join(CACHE, "result.json")
     if args.doc_only:
         with open(result_path) as fh:
             result = json.load(fh)
     else:
-        run_all()
+        record = pages.start(MEASURES, "python experiments/spectral_peak.py --rerun")
+        kept = run_all(record["commit"], rerun=args.rerun)
+        if kept:  # runs of other commits: the freshness test checks them too
+            record["runs_at"] = sorted(kept)
         result = measure()
+        result["provenance"] = pages.finish(record)
         atomic_write_json(result_path, result)
     figure(result)
     write_doc(result)

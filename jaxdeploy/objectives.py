@@ -311,7 +311,8 @@ PRESETS = {
     # The same intents read through features that are reproducible: from rtol 1e-6 to 1e-8
     # their values move by under 5 % of their range over the design space, where the decay
     # and frequency terms above move by 25–45 % of theirs, being set by the chaotic post-lock
-    # rattle (docs/design.md, "Which features are well posed"). Panel 1 follows the ideal
+    # rattle (measured by the 9x9 design study of commit d3c11ca, its section "Which features
+    # are well posed": `git show d3c11ca:docs/design.md`). Panel 1 follows the ideal
     # deployment closely (fast response); panel 2's post-lock peak tip displacement and
     # acceleration deviations are small (quiet).
     "paper_reproducible": (

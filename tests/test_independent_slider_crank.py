@@ -74,7 +74,8 @@ TIGHT = {"rtol": 1e-10, "atol": 1e-13}
 #
 # generalized-α is second order, so it is run at rtol 1e-12, atol 1e-15 here: at rtol 1e-10
 # its onsets over two revolutions are off by up to 6.3e-7 s (μ = 0), at 1e-11 by 2.1e-7 s;
-# at 1e-12 (measured at 2620739, 585k steps, 54 CPU-s at load ~8) by 4.8e-8 s with x_s within
+# at 1e-12 (measured on the code of 61e187c, below c56cdd5 that set this bound, whose run's
+# own commit was rebased away; 585k steps, 54 CPU-s at load ~8) by 4.8e-8 s with x_s within
 # 4.4e-10 m over 4 ms: the target is met for μ = 0 (docs/verification.md).
 #
 # μ = 0.01 at rtol 1e-12 (648k steps): all 43 impacts, but onsets off by up to 3.9e-5 s.

@@ -79,7 +79,8 @@ def add_arguments(parser) -> None:
     )
     # deploy_array's objectives are rough below about half a unit of ln Ra (contact events
     # shift with the design): smoothing at s = 0.1 follows that roughness, at 0.5 the trend
-    # (docs/design.md, "Gradient-based optimum").
+    # (the 9x9 design study of commit d3c11ca, its section "Gradient-based optimum": `git show
+    # d3c11ca:docs/design.md`; today's docs/design.md reruns a 4x4 grid only).
     parser.add_argument(
         "--smoothing", type=positive("--smoothing"), default=0.5, help="s in ln x (smoothed), > 0"
     )

@@ -72,7 +72,7 @@ LATCH_PRELOAD_PARAMS = (
     "panel_latch_preload",
 )
 
-# How a hinge's friction depends on its roughness (docs/contact.md, "Roughness couplings"):
+# How a hinge's friction depends on its roughness (docs/contact.md, "Roughness helpers"):
 # "constant" uses friction_coefficient for every Ra; "ploughing" is adhesion plus Bowden–Tabor
 # ploughing by the asperities of a turned surface (`contact.PloughingFriction`).
 FRICTION_ROUGHNESS_MODELS = ("constant", "ploughing")

@@ -1,0 +1,1 @@
+"""Scripts that maintain the checkout (not part of the installed package)."""
