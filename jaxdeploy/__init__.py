@@ -12,6 +12,9 @@ The names a user needs, in one place (the submodules behind them may move; these
   `Spring`, `RotationalSpring`, `CoilSpringDrive`, `Latch`, `PreloadedLatch`, `AppliedForce`,
   `AppliedTorque`, and `consistent_state` for the initial state; contact laws are in the
   module `contact`;
+* the persistent caches: `enable_caches()` at the top of a script (or `JAXDEPLOY_CACHE_DIR`
+  set before `import jaxdeploy`) keeps traced and compiled programs on disk, so a second
+  process neither traces nor compiles what an earlier one did (the command line always does);
 * identify, design and sweep: the modules `fit` (`fit.fit`, `fit.parameter_jacobian`),
   `optimize` (`optimize.optimize`, `optimize.DesignProblem`) and `sweep` (`sweep.sweep`,
   `sweep.load_sweep`). They are modules, not functions, because `jaxdeploy.fit`,
@@ -29,6 +32,7 @@ Simulation code assumes 64-bit throughout.
 """
 
 import importlib
+import os
 from typing import TYPE_CHECKING
 
 import jax
@@ -37,10 +41,18 @@ from ._version import __version__
 
 jax.config.update("jax_enable_x64", True)
 
+if os.environ.get("JAXDEPLOY_CACHE_DIR", "").strip():
+    # The variable asks for the caches in Python as on the command line (`enable_caches`;
+    # "off" keeps them off). Here, before any simulation module imports equinox.
+    from ._compilation_cache import enable_caches as _enable_caches
+
+    _enable_caches()
+
 # Public name -> the module that defines it (a module name maps to itself).
 _EXPORTS = {
     # simulation
     "simulate": "jaxdeploy.simulation",
+    "enable_caches": "jaxdeploy._compilation_cache",
     "Trajectory": "jaxdeploy.simulation",
     "StepControl": "jaxdeploy.solvers",
     "simulate_batch": "jaxdeploy.batch",
@@ -100,6 +112,7 @@ __all__ = [  # = _EXPORTS + _MODULES + __version__ (tests/test_public_api.py che
     "analysis",
     "consistent_state",
     "contact",
+    "enable_caches",
     "fit",
     "get_scene",
     "mechanism",
@@ -129,6 +142,7 @@ def __dir__():
 
 if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from . import analysis, contact, fit, mechanism, optimize, scenes, solvers, sweep
+    from ._compilation_cache import enable_caches
     from .batch import simulate_batch
     from .mechanism import (
         AngleDriver,

@@ -1,4 +1,4 @@
-"""A persistent XLA compilation cache for the command line.
+"""jaxdeploy's two persistent caches: JAX's compilation cache and the program cache.
 
 Compiling the default deploy_array simulation takes seconds to tens of seconds on a small CPU;
 with JAX's persistent cache (https://docs.jax.dev/en/latest/persistent_compilation_cache.html)
@@ -17,11 +17,18 @@ and lowered programs beside it (folder + `-programs`), so that a warm run skips 
 
 Location: `$JAXDEPLOY_CACHE_DIR`, else `$XDG_CACHE_HOME/jaxdeploy/xla`, else
 `~/.cache/jaxdeploy/xla`. Set `JAXDEPLOY_CACHE_DIR=off` to disable both.
+
+Who turns them on: the command line, always (unless `off`); a Python script, with the public
+`jaxdeploy.enable_caches()` or by setting `JAXDEPLOY_CACHE_DIR` before `import jaxdeploy`
+(which then calls it). They stay off in Python otherwise: a library should not write to a
+user's home unasked, and the caches switch equinox's runtime checks to NaNs (above).
 """
 
 from __future__ import annotations
 
 import os
+import sys
+import warnings
 
 
 def cache_dir() -> str | None:
@@ -42,7 +49,21 @@ def prefer_cacheable_errors() -> None:
 
 def enable_compilation_cache() -> str | None:
     """Point JAX's persistent compilation cache at `cache_dir()` and the program cache beside
-    it; returns the compilation cache's folder.
+    it (the command line's set-up, after `prefer_cacheable_errors`); returns the compilation
+    cache's folder."""
+    from . import _program_cache
+
+    chosen = cache_dir()
+    if chosen is None:
+        import jax
+
+        _program_cache.enable(None)
+        return jax.config.jax_compilation_cache_dir or None
+    return _enable(chosen)
+
+
+def _enable(folder: str) -> str | None:
+    """The compilation cache in `folder`, the program cache in `folder` + `-programs`.
 
     Leaves a cache directory the user configured for JAX itself untouched. A cache that
     cannot be created (read-only home) is skipped: compiling again is slower, not wrong.
@@ -51,13 +72,9 @@ def enable_compilation_cache() -> str | None:
 
     from . import _program_cache
 
-    chosen = cache_dir()
-    _program_cache.enable(None if chosen is None else chosen.rstrip(os.sep) + "-programs")
+    _program_cache.enable(folder.rstrip(os.sep) + "-programs")
     if jax.config.jax_compilation_cache_dir:
         return jax.config.jax_compilation_cache_dir
-    folder = cache_dir()
-    if folder is None:
-        return None
     try:
         os.makedirs(folder, exist_ok=True)
     except OSError:
@@ -69,3 +86,55 @@ def enable_compilation_cache() -> str | None:
     if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     return folder
+
+
+def enable_caches(path: str | os.PathLike | None = None) -> str | None:
+    """Turn on jaxdeploy's persistent caches for this process, as the command line does.
+
+    Afterwards a `simulate` (and the initial state's assembly, `consistent_state`) whose
+    mechanism has the composition, array shapes and settings of an earlier one, in this or
+    any later process, reads its program back instead of tracing it (the program cache,
+    `jax.export`: see `jaxdeploy/_program_cache.py` for what its key holds), and XLA loads
+    the compiled program from JAX's persistent compilation cache instead of compiling it.
+    Results are bit for bit those of an uncached run; new parameter values reuse the
+    programs (they are data).
+
+    **Arguments:** `path`: the compilation cache's folder; the program cache goes beside it
+    in `path + "-programs"`. Default: `$JAXDEPLOY_CACHE_DIR`, else
+    `$XDG_CACHE_HOME/jaxdeploy/xla`, else `~/.cache/jaxdeploy/xla` — the command line's, so
+    a script and `jaxdeploy simulate` share them. `JAXDEPLOY_CACHE_DIR=off` turns both off.
+
+    Call it first, before anything imports equinox or diffrax (`import jaxdeploy as jd;
+    jd.enable_caches()` at the top of a script, or set `JAXDEPLOY_CACHE_DIR` before starting
+    Python, which calls it on import): it sets `EQX_ON_ERROR=nan` (unless you chose a value),
+    because JAX can neither export nor store a program whose runtime checks are host
+    callbacks. `simulate` checks its inputs in Python first, so no check is lost there; in
+    your own equinox code, `eqx.error_if` then gives NaN instead of raising. Called after
+    equinox was imported with raising checks, it warns and turns on the compilation cache
+    alone. A JAX compilation cache folder you configured yourself (`jax_compilation_cache_dir`)
+    is kept.
+
+    **Returns:** the compilation cache's folder, or None when the caches are off.
+    """
+    from . import _program_cache
+
+    if path is not None:
+        path = os.fspath(path)
+        chosen = None if path.strip().lower() in ("", "off", "0", "none") else path
+    else:
+        chosen = cache_dir()
+    if chosen is None:
+        _program_cache.enable(None)
+        return None
+    if "equinox" not in sys.modules:
+        os.environ.setdefault("EQX_ON_ERROR", "nan")
+    elif _program_cache.equinox_on_error() not in ("nan", "off"):
+        warnings.warn(
+            "jaxdeploy.enable_caches(): equinox was imported before it, with runtime checks "
+            "that are host callbacks (EQX_ON_ERROR=raise), so programs cannot be exported: "
+            "only the compilation cache is on. Call enable_caches() before importing anything "
+            "else, or set EQX_ON_ERROR=nan (or JAXDEPLOY_CACHE_DIR) before starting Python.",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    return _enable(chosen)

@@ -15,7 +15,10 @@ def _python_blocks(name):
 
 
 @pytest.mark.slow  # 66 s of the default suite at 844cb65 (2 cores): kept out of it
-def test_mechanism_page_four_bar_runs():
+def test_mechanism_page_four_bar_runs(monkeypatch):
+    # The page's script turns the persistent caches on (`enable_caches()`); in this shared
+    # test process they stay off (a script's second process is tests/test_python_caches.py).
+    monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", "off")
     namespace = {}
     for block in _python_blocks("mechanism.md"):
         exec(compile(block, "docs/mechanism.md", "exec"), namespace)

@@ -26,7 +26,7 @@ def _toy(x, scale, power):
 def store(tmp_path, monkeypatch):
     """The store on, in a fresh folder, as in a process whose equinox checks are not host
     callbacks (the toy program has none either way)."""
-    monkeypatch.setattr(_program_cache, "_equinox_on_error", lambda: "nan")
+    monkeypatch.setattr(_program_cache, "equinox_on_error", lambda: "nan")
     monkeypatch.setattr(_program_cache, "_unexportable", set())
     monkeypatch.setattr(_program_cache, "_loaded", {})
     _program_cache.enable(str(tmp_path / "programs"))
@@ -83,7 +83,7 @@ def test_code_options_and_shapes_each_miss(store, monkeypatch):
     assert base != _program_cache.key(_toy, (x, 1.5, 3))  # the package's code
     # Through `call`: every changed composition writes its own entry.
     monkeypatch.undo()
-    monkeypatch.setattr(_program_cache, "_equinox_on_error", lambda: "nan")
+    monkeypatch.setattr(_program_cache, "equinox_on_error", lambda: "nan")
     for args in ((x, 1.5, 3), (jnp.ones(8), 1.5, 3), (x, 1.5, 2), (x, 2.5, 3)):
         out = _program_cache.call(_toy, *args)
         np.testing.assert_array_equal(np.asarray(out["y"]), np.asarray(_toy(*args)["y"]))
@@ -118,7 +118,7 @@ def test_what_cannot_be_keyed_runs_uncached(store):
 
 
 def test_equinox_host_callbacks_make_it_uncached(store, monkeypatch):
-    monkeypatch.setattr(_program_cache, "_equinox_on_error", lambda: "raise")
+    monkeypatch.setattr(_program_cache, "equinox_on_error", lambda: "raise")
     assert _program_cache.key(_toy, (jnp.ones(3), 1.0, 1)) is None
 
 

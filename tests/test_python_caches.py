@@ -1,0 +1,93 @@
+"""The persistent caches from Python (`jaxdeploy.enable_caches`, or `JAXDEPLOY_CACHE_DIR` read
+on import): a script's second process reads the programs the first one traced, so it traces
+none of them, and gets bit-identical results. Traces are counted from JAX's own compile events
+(`jax.monitoring`), never timed."""
+
+import json
+import os
+import subprocess
+import sys
+
+# A user's script: the scene, its initial state (an assembly program) and a run (the solve).
+# It prints the names of the functions JAX traced in this process and the run's output.
+_SCRIPT = """
+import json, sys
+from jax import monitoring
+
+traced = []
+def record(event, start, end, **kwargs):
+    if event == "/jax/core/compile/jaxpr_trace_duration":
+        traced.append(kwargs.get("fun_name"))
+monitoring.register_event_time_span_listener(record)
+
+import jaxdeploy as jd
+if sys.argv[1] != "from-environment":
+    jd.enable_caches(sys.argv[1])
+
+scene = jd.get_scene("pendulum")
+params = scene.resolve_params()
+mechanism = scene.build(params)
+trajectory = jd.simulate(
+    mechanism, scene.initial_state(params, mechanism), 0.05, n_save=11,
+    control=scene.default_control,
+)
+import numpy as np
+q = np.asarray(trajectory.q)
+print(json.dumps({"traced": traced, "q": q.tolist(), "bits": q.tobytes().hex(),
+                  "status": trajectory.status()}))
+"""
+
+
+def _run(tmp_path, argument, **env_changes):
+    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
+    env.update(env_changes)
+    proc = subprocess.run(
+        [sys.executable, "-c", _SCRIPT, argument],
+        env=env,
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_second_process_traces_no_program_and_gives_identical_results(tmp_path):
+    cache = tmp_path / "cache"
+    first = _run(tmp_path, str(cache))
+    # The first process traced the assembly and the solve for the program cache...
+    exported_first = [name for name in first["traced"] if name.startswith("exported_")]
+    assert "exported__solve" in exported_first, first["traced"]
+    assert len(exported_first) >= 2, first["traced"]  # the solve and the initial assembly
+    assert len(list((tmp_path / "cache-programs").glob("*.jaxexport"))) >= 2
+    assert any(cache.iterdir())  # JAX's compilation cache
+    # ...the second (the caches named by the environment variable alone) traced none of them:
+    # what is left are JAX's single operations on concrete arrays and the call of each
+    # exported program, no function of jaxdeploy's.
+    second = _run(tmp_path, "from-environment", JAXDEPLOY_CACHE_DIR=str(cache))
+    assert not [n for n in second["traced"] if n.startswith("exported_")], second["traced"]
+    assert "_solve" not in second["traced"]
+    assert second["traced"].count("call_exported") >= 2, second["traced"]
+    assert first["status"] == second["status"] == "ok"
+    assert second["bits"] == first["bits"]  # bit for bit
+
+
+def test_caches_called_after_equinox_warn_and_keep_the_compilation_cache(tmp_path):
+    """Called after equinox was imported with raising checks, `enable_caches` cannot make
+    programs exportable: it says so and turns on the compilation cache alone."""
+    code = (
+        "import warnings, equinox, jaxdeploy as jd, jax\n"
+        "from jaxdeploy import _program_cache\n"
+        "with warnings.catch_warnings(record=True) as caught:\n"
+        "    warnings.simplefilter('always')\n"
+        f"    folder = jd.enable_caches({str(tmp_path / 'c')!r})\n"
+        "print(folder == jax.config.jax_compilation_cache_dir, "
+        "_program_cache.key(lambda x: x, (1.0,)) is None, "
+        "any('before importing' in str(w.message) for w in caught))\n"
+        "print(jd.enable_caches('off'), _program_cache.folder())\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    assert proc.stdout.split("\n")[:2] == ["True True True", "None None"], proc.stdout
