@@ -147,3 +147,63 @@ def whole_page(text: str, record: dict) -> str:
     after its title line."""
     title, _, body = text.partition("\n")
     return f"{title}\n\n{stamp(finish(record))}\n\n{body.lstrip()}"
+
+
+# --- freshness (tests/test_page_freshness.py, `python -m tools.pages --stale`) ---------------
+
+BLOCK = re.compile(r"<!-- BEGIN (\S+) -->(.*?)<!-- END \1 -->", flags=re.S)
+
+
+def _git_ok(root: str, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["git", *args], cwd=root, capture_output=True, text=True)
+
+
+def record_problems(root: str, record: dict) -> list[str]:
+    """Why a provenance record is stale, checked against the git history at `root` (empty
+    when fresh): made from a dirty tree; its commit, or the commit of a run it reused
+    (`runs_at`), not an ancestor of HEAD; a measured path gone, or changed by a later
+    commit."""
+    if record.get("dirty"):
+        return [f"made from uncommitted code (dirty tree at {record['commit'][:12]})"]
+    problems = []
+    measures = record["measures"]
+    missing = [p for p in measures if not os.path.exists(os.path.join(root, p))]
+    if missing:
+        problems.append(f"it measures paths that do not exist: {missing}")
+    for commit in [record["commit"], *record.get("runs_at", [])]:
+        if _git_ok(root, "merge-base", "--is-ancestor", commit, "HEAD").returncode != 0:
+            problems.append(f"its commit {commit[:12]} is not in this history (rebased?)")
+            continue
+        changes = _git_ok(root, "log", "--oneline", f"{commit}..HEAD", "--", *measures).stdout
+        if changes.strip():
+            problems.append(
+                f"made at {commit[:12]}; these commits changed what it measures since:\n{changes}"
+            )
+    return problems
+
+
+def page_problems(root: str, text: str) -> list[str]:
+    """Why a generated page (or one block of it) is stale: a block without a record, no
+    record at all, or a stale record (`record_problems`)."""
+    problems = [
+        f"block {name!r} has no provenance record"
+        for name, body in BLOCK.findall(text)
+        if read(body) is None
+    ]
+    records = read_all(text)
+    if not records:
+        problems.append("no provenance record")
+    for record in records:
+        problems += record_problems(root, record)
+    return problems
+
+
+def part(text: str, block: str | None) -> str | None:
+    """The block `block` of a page's text (None if the page lacks it), or with `block` None
+    the text the page's own script wrote: every generated block of other scripts removed."""
+    if block is None:
+        return BLOCK.sub("", text)
+    for name, body in BLOCK.findall(text):
+        if name == block:
+            return f"<!-- BEGIN {name} -->{body}<!-- END {name} -->"
+    return None

@@ -19,16 +19,15 @@ expected failure, strict — once the page is fresh the test fails until it leav
 from __future__ import annotations
 
 import pathlib
-import re
 import subprocess
 
 import pytest
 
 from jaxdeploy import pages
-from tools.pages import GENERATORS
+from tools.pages import GENERATORS, split
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-BLOCK = re.compile(r"<!-- BEGIN (\S+) -->(.*?)<!-- END \1 -->", flags=re.S)
+BLOCK = pages.BLOCK
 
 # Hand-written pages: no generated numbers or figures.
 PROSE = {
@@ -79,42 +78,8 @@ def _history_or_skip(root=ROOT):
         pytest.skip("shallow clone: the history the pages' commits are in may be missing")
 
 
-def record_problems(root, record) -> list[str]:
-    """Why a provenance record is stale (empty when fresh)."""
-    commits = [record["commit"], *record.get("runs_at", [])]
-    if record.get("dirty"):
-        return [f"made from uncommitted code (dirty tree at {record['commit'][:12]})"]
-    problems = []
-    for commit in commits:
-        if _git(root, "merge-base", "--is-ancestor", commit, "HEAD").returncode != 0:
-            problems.append(f"its commit {commit[:12]} is not in this history (rebased?)")
-            continue
-        measures = record["measures"]
-        missing = [p for p in measures if not (pathlib.Path(root) / p).exists()]
-        if missing:
-            problems.append(f"it measures paths that do not exist: {missing}")
-        changes = _git(root, "log", "--oneline", f"{commit}..HEAD", "--", *measures).stdout
-        if changes.strip():
-            problems.append(
-                f"made at {commit[:12]}; these commits changed what it measures since:\n{changes}"
-            )
-    return problems
-
-
-def page_problems(root, text) -> list[str]:
-    """Why a generated page is stale: a block without a record, a page with none, or a stale
-    record."""
-    problems = [
-        f"block {name!r} has no provenance record"
-        for name, body in BLOCK.findall(text)
-        if pages.read(body) is None
-    ]
-    records = pages.read_all(text)
-    if not records:
-        problems.append("no provenance record")
-    for record in records:
-        problems += record_problems(root, record)
-    return problems
+def page_problems(root, text):
+    return pages.page_problems(str(root), text)
 
 
 def test_every_page_is_generated_or_prose():
@@ -249,3 +214,21 @@ def test_a_written_block_reads_back(tmp_path, repo):
     assert "cpu_s" in back and "_t0" not in back
     assert "prose" in text and "`python make_page.py`" in text
     assert page_problems(repo, text) == []
+
+
+def test_every_generator_and_the_blocks_it_writes_exist():
+    """`tools/pages.py`'s list matches the tree: each script exists, each page and block it
+    names is there (a renamed block would otherwise never be checked)."""
+    for g in GENERATORS:
+        script = next(a for a in g.argv[1:] if not a.startswith("-"))
+        if script.endswith(".py"):
+            assert (ROOT / g.cwd / script).exists(), f"{g.name}: no {script}"
+        else:  # a module: -m name
+            module = g.argv[g.argv.index("-m") + 1].replace(".", "/")
+            assert any(
+                (ROOT / g.cwd / f"{module}{tail}").exists() for tail in (".py", "/__main__.py")
+            ), f"{g.name}: no module {module}"
+        for spec in g.pages:
+            page, block = split(spec)
+            text = (ROOT / page).read_text(encoding="utf-8")
+            assert pages.part(text, block) is not None, f"{g.name}: {page} has no block {block}"

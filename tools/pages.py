@@ -4,17 +4,19 @@
 Each generator records in the block it writes (`jaxdeploy.pages`) the commit it ran at and
 the paths it measures; `tests/test_page_freshness.py` fails once a later commit changes one of
 those paths. `GENERATORS` below is the one list of what writes which page, in the order they
-must run, with the cost measured on this project's 2-core machine (CPU minutes, user +
-system, of the generator's process and its children; the load beside it in the docs table,
-docs/pages.md).
+must run, with the cost measured on this project's 2-core machine.
 
     python -m tools.pages                 # every generator (hours: see `--list`)
-    python -m tools.pages --quick         # only those under QUICK_MINUTES of CPU each
+    python -m tools.pages --stale         # only those whose pages are stale
+    python -m tools.pages --quick         # only those under QUICK_MINUTES each
     python -m tools.pages --only restitution_table extremes_sampling
-    python -m tools.pages --list          # what would run, and the cost of each
+    python -m tools.pages --list          # what would run, its cost, and why it is stale
 
-A generator refuses a dirty tree (changes outside docs/ and README.md): commit first. The run
-stops at the first generator that fails; the pages already written stay written.
+A generator refuses a dirty tree (changes outside docs/ and README.md): commit first. A
+generator that exits non-zero (a fit that misses its criterion writes its page and says so)
+does not stop the others; the run's exit status is 1 then. The long studies' stored runs
+(`results/robustness`, `results/design_study`) are moved aside first so that every number is
+made at this commit (`--keep-results` reuses them; the page records their commits).
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ import subprocess
 import sys
 import time
 
+from jaxdeploy import pages
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 QUICK_MINUTES = 10.0
 
@@ -35,201 +39,171 @@ QUICK_MINUTES = 10.0
 class Generator:
     name: str
     argv: tuple[str, ...]  # run with the checkout on PYTHONPATH
-    pages: tuple[str, ...]  # what it writes (pages; blocks in brackets)
-    cpu_min: float  # measured cost, CPU minutes (see docs/pages.md for the load)
+    pages: tuple[str, ...]  # what it writes: a page (whole), or "page [block]"
+    minutes: float  # its cost, minutes on this project's 2-core machine (`measured` says how)
+    measured: str  # CPU or wall, the load, and the run it comes from
     cwd: str = "."  # relative to the checkout
-    note: str = ""
+    results: str = ""  # a folder of stored runs it reuses: moved aside first (--keep-results)
 
 
 PY = sys.executable
+I = "docs/identification.md"
 
-# In order: the geometry script writes the scene's data (every deploy_array page measures
-# it), verify_mechanics.py rewrites verification.md whole before report.py fills its block,
-# identification.py makes the measurements identification_landscape.py reads.
+# In order: verify_mechanics.py rewrites verification.md whole (keeping the blocks of other
+# scripts) before report.py writes its block; identification.py makes the measurements
+# identification_landscape.py reads. The measured costs: CPU minutes (user + system) where
+# said, else wall minutes; "today": measured on 2026-11-27 on a copy of main at load 14-22
+# (other helpers' jobs), CPU time being the less load-sensitive number.
 GENERATORS = (
-    Generator(
-        "deploy_array_geometry",
-        (PY, "experiments/deploy_array_geometry.py"),
-        ("docs/deploy_array_geometry.md [geometry]",),
-        0.3,
-    ),
-    Generator(
-        "bench",
-        (PY, "-m", "benchmarks", "all"),
-        ("docs/performance.md", "docs/bench/", "README.md [tour times]"),
-        13.0,
-        note="make bench; installs the bench extra (exudyn)",
-    ),
-    Generator(
-        "verify_mechanics", (PY, "tests/verify_mechanics.py"), ("docs/verification.md",), 5.0
-    ),
-    Generator(
-        "independent_report",
-        (PY, "-m", "independent.report"),
-        ("docs/verification.md [independent-references]",),
-        2.0,
-        cwd="tests",
-    ),
-    Generator(
-        "solver_crossover",
-        (PY, "-m", "independent.solver_crossover"),
-        ("docs/solver_by_tolerance.md [solver-by-tolerance]",),
-        4.0,
-        cwd="tests",
-    ),
-    Generator(
-        "deploy_array_report",
-        (PY, "-m", "independent.deploy_array_report"),
-        ("docs/deploy_array.md [independent-check]",),
-        4.0,
-        cwd="tests",
-    ),
-    Generator(
-        "contact_laws",
-        (PY, "experiments/contact_laws.py"),
-        ("docs/contact.md [contact-laws-figures]",),
-        0.5,
-    ),
-    Generator(
-        "clearance_sides",
-        (PY, "experiments/clearance_sides.py"),
-        ("docs/contact.md [clearance_sides]",),
-        0.5,
-    ),
-    Generator(
-        "restitution_table", (PY, "experiments/restitution_table.py"), ("docs/restitution.md",), 3.5
-    ),
-    Generator(
-        "extremes_sampling",
-        (PY, "experiments/extremes_sampling.py"),
-        ("docs/output_extremes.md",),
-        3.2,
-    ),
-    Generator(
-        "generalized_alpha_error_control",
-        (PY, "experiments/generalized_alpha_error_control.py"),
-        ("docs/generalized_alpha_error.md [generalized-alpha-error]",),
-        3.0,
-    ),
-    Generator(
-        "spectral_peak",
-        (PY, "experiments/spectral_peak.py", "--rerun"),
-        ("docs/spectral_peak.md",),
-        5.5,
-    ),
-    Generator(
-        "deploy_array_latch",
-        (PY, "experiments/deploy_array_latch.py"),
-        ("docs/deploy_array.md [latch-comparison]",),
-        3.0,
-    ),
-    Generator(
-        "deploy_array_impact_rule",
-        (PY, "experiments/deploy_array_impact_rule.py"),
-        ("docs/deploy_array.md [impact-velocity-rule]",),
-        3.0,
-    ),
-    Generator(
-        "robustness",
-        (PY, "experiments/robustness.py", "all"),
-        ("docs/robustness.md",),
-        35.0,
-        note="reuses results/robustness/*.json: delete them first for a fresh run",
-    ),
-    Generator(
-        "identification",
-        (PY, "experiments/identification.py", "--regenerate", "--rerun"),
-        ("docs/identification.md [identification]",),
-        32.0,
-    ),
-    Generator(
-        "identification_landscape",
-        (PY, "experiments/identification_landscape.py"),
-        ("docs/identification.md [identification_landscape]",),
-        4.0,
-    ),
-    Generator(
-        "identification_independent",
-        (PY, "experiments/identification_independent.py", "--rerun"),
-        ("docs/identification.md [identification_independent]",),
-        30.0,
-    ),
-    Generator(
-        "identification_solvers",
-        (PY, "experiments/identification_solvers.py", "--rerun"),
-        ("docs/identification.md [identification_solvers]",),
-        30.0,
-    ),
-    Generator(
-        "gradient_sensitivity",
-        (PY, "experiments/gradient_sensitivity.py"),
-        ("docs/identification.md [gradient_sensitivity]",),
-        6.0,
-    ),
-    Generator(
-        "gradient_horizon",
-        (PY, "experiments/gradient_horizon.py"),
-        ("docs/identification.md [gradient_horizon]",),
-        7.0,
-    ),
-    Generator(
-        "design_study",
-        (PY, "experiments/design_study.py", "all"),
-        ("docs/design.md",),
-        25.0,
-        note="reuses results/design_study/: delete it first for a fresh run",
-    ),
-    Generator(
-        "paper_study",
-        (PY, "experiments/paper_study.py", "--rerun"),
-        ("docs/paper_study.md",),
-        100.0,
-    ),
-)
+    Generator("deploy_array_geometry", (PY, "experiments/deploy_array_geometry.py"),
+              ("docs/deploy_array_geometry.md [geometry]",), 0.1, "CPU, today"),
+    Generator("bench", (PY, "-m", "benchmarks", "all"),
+              ("docs/performance.md", "README.md"), 11.5,
+              "wall, load 1.0-1.6, at 79fefb3 (9.7 min + 1.8 min tour); make bench's pages: "
+              "docs/bench/, the README's tour times"),
+    Generator("verify_mechanics", (PY, "tests/verify_mechanics.py"), ("docs/verification.md",),
+              5.1, "wall, load ~9, at 3514e25 (306 s)"),
+    Generator("independent_report", (PY, "-m", "independent.report"),
+              ("docs/verification.md [independent-references]",), 1.8,
+              "wall, load 1.0, at 313ceb5 (106 s)", cwd="tests"),
+    Generator("solver_crossover", (PY, "-m", "independent.solver_crossover"),
+              ("docs/solver_by_tolerance.md [solver-by-tolerance]",), 4.0,
+              "wall, load 0.6-1.2, at 79fefb3", cwd="tests"),
+    Generator("deploy_array_report", (PY, "-m", "independent.deploy_array_report"),
+              ("docs/deploy_array.md [independent-check]",), 8.0,
+              "wall, load 6-7, at d88496e's parent", cwd="tests"),
+    Generator("contact_laws", (PY, "experiments/contact_laws.py"),
+              ("docs/contact.md [contact-laws-figures]",), 0.25, "CPU, today (14.5 s)"),
+    Generator("clearance_sides", (PY, "experiments/clearance_sides.py"),
+              ("docs/contact.md [clearance_sides]",), 0.27, "CPU, today (16 s)"),
+    Generator("restitution_table", (PY, "experiments/restitution_table.py"),
+              ("docs/restitution.md",), 1.3, "CPU, today (80 s)"),
+    Generator("extremes_sampling", (PY, "experiments/extremes_sampling.py"),
+              ("docs/output_extremes.md",), 3.2, "CPU, at 376763b's parent"),
+    Generator("generalized_alpha_error_control",
+              (PY, "experiments/generalized_alpha_error_control.py"),
+              ("docs/generalized_alpha_error.md [generalized-alpha-error]",), 3.0,
+              "estimate (not yet measured)"),
+    Generator("spectral_peak", (PY, "experiments/spectral_peak.py", "--rerun"),
+              ("docs/spectral_peak.md",), 5.5, "CPU, load 8-9, at 9a97edd (16.5 min wall)"),
+    Generator("deploy_array_latch", (PY, "experiments/deploy_array_latch.py"),
+              ("docs/deploy_array.md [latch-comparison]",), 3.0, "estimate (not yet measured)"),
+    Generator("deploy_array_impact_rule", (PY, "experiments/deploy_array_impact_rule.py"),
+              ("docs/deploy_array.md [impact-velocity-rule]",), 3.0,
+              "estimate (not yet measured)"),
+    Generator("robustness", (PY, "experiments/robustness.py", "all"),
+              ("docs/robustness.md [robustness-impact]", "docs/robustness.md [robustness-deploy]",
+               "docs/robustness.md [robustness-long]"), 35.0,
+              "CPU, load 15-20, at b287360: impact 3, deploy 12; long never run, capped by "
+              "--budget-min 20", results="results/robustness"),
+    Generator("identification", (PY, "experiments/identification.py", "--regenerate", "--rerun"),
+              (f"{I} [identification]",), 32.0, "CPU, load 3-5, at b6bd439"),
+    Generator("identification_landscape", (PY, "experiments/identification_landscape.py"),
+              (f"{I} [identification_landscape]",), 2.5, "wall of its batch, 148 s (page)"),
+    Generator("identification_independent",
+              (PY, "experiments/identification_independent.py", "--rerun"),
+              (f"{I} [identification_independent]",), 5.1, "CPU of the four fits, load 2-4 "
+              "(page: 56 + 54 + 49 + 147 s)"),
+    Generator("identification_solvers", (PY, "experiments/identification_solvers.py", "--rerun"),
+              (f"{I} [identification_solvers]",), 15.4, "CPU of the 16 fits, load 13-29 (page)"),
+    Generator("gradient_sensitivity", (PY, "experiments/gradient_sensitivity.py"),
+              (f"{I} [gradient_sensitivity]",), 11.2,
+              "wall, load 3-7, at 3986359 (AD 301 s + FD batch 371 s)"),
+    Generator("gradient_horizon", (PY, "experiments/gradient_horizon.py"),
+              (f"{I} [gradient_horizon]",), 8.0, "estimate (not yet measured)"),
+    Generator("design_study", (PY, "experiments/design_study.py", "all"), ("docs/design.md",),
+              20.0, "wall, load 6-7, at f663278: grids 800 s + the optimisation",
+              results="results/design_study"),
+    Generator("paper_study", (PY, "experiments/paper_study.py", "--rerun"),
+              ("docs/paper_study.md",), 95.0,
+              "wall, load 5-10: runs 2821 s (page, at acab80b) + sensitivities 2311 s (1f9a368)"),
+)  # fmt: skip
 
 
-def run(generator: Generator) -> float:
-    """Run one generator; its CPU minutes (children's user + system)."""
+def split(spec: str) -> tuple[str, str | None]:
+    """`"page [block]"` -> (page, block); a whole page -> (page, None)."""
+    page, _, block = spec.partition(" [")
+    return page, block.rstrip("]") or None
+
+
+def stale(generator: Generator, root: str = ROOT) -> list[str]:
+    """Why the pages or blocks a generator writes are stale (empty: all fresh)."""
+    problems = []
+    for spec in generator.pages:
+        page, block = split(spec)
+        with open(os.path.join(root, page), encoding="utf-8") as fh:
+            text = pages.part(fh.read(), block)
+        found = ["missing"] if text is None else pages.page_problems(root, text)
+        problems += [f"{spec}: {p.splitlines()[0]}" for p in found]
+    return problems
+
+
+def move_aside(folder: str) -> None:
+    """A generator's stored runs, renamed out of its way (never deleted)."""
+    path = os.path.join(ROOT, folder)
+    if os.path.isdir(path):
+        target = f"{path}.old-{time.strftime('%Y%m%d-%H%M%S')}"
+        os.rename(path, target)
+        print(f"[pages] moved {folder} aside to {os.path.relpath(target, ROOT)}", flush=True)
+
+
+def run(generator: Generator) -> int:
+    """Run one generator (its pages are written even when it exits non-zero: a fit that misses
+    its criterion says so on the page); its exit status."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [ROOT, os.environ.get(
         "PYTHONPATH")]))}  # fmt: skip
     start = time.perf_counter()
-    subprocess.run(generator.argv, cwd=os.path.join(ROOT, generator.cwd), env=env, check=True)
+    done = subprocess.run(generator.argv, cwd=os.path.join(ROOT, generator.cwd), env=env)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime) / 60
-    print(f"[pages] {generator.name}: {cpu:.1f} CPU-min, "
+    print(f"[pages] {generator.name}: exit {done.returncode}, {cpu:.1f} CPU-min, "
           f"{(time.perf_counter() - start) / 60:.1f} min wall, load "
           f"{os.getloadavg()[0]:.1f}", flush=True)  # fmt: skip
-    return cpu
+    return done.returncode
 
 
-def select(only=(), quick=False):
+def select(only=(), quick=False, stale_only=False):
     names = {g.name for g in GENERATORS}
     unknown = sorted(set(only) - names)
     if unknown:
         raise SystemExit(f"unknown generator(s) {unknown}; choose from {sorted(names)}")
     chosen = [g for g in GENERATORS if not only or g.name in only]
-    return [g for g in chosen if not quick or g.cpu_min <= QUICK_MINUTES]
+    chosen = [g for g in chosen if not quick or g.minutes <= QUICK_MINUTES]
+    return [g for g in chosen if not stale_only or stale(g)]
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", nargs="+", default=(), metavar="NAME", help="these generators")
     ap.add_argument("--quick", action="store_true",
-                    help=f"only generators under {QUICK_MINUTES:g} CPU-min each")  # fmt: skip
-    ap.add_argument("--list", action="store_true", help="list and stop")
+                    help=f"only generators under {QUICK_MINUTES:g} min each")  # fmt: skip
+    ap.add_argument("--stale", action="store_true", help="only generators of stale pages")
+    ap.add_argument(
+        "--keep-results",
+        action="store_true",
+        help="let the long studies reuse their stored runs (recorded as runs_at)",
+    )
+    ap.add_argument("--list", action="store_true", help="list (with why stale) and stop")
     args = ap.parse_args(argv)
-    chosen = select(args.only, args.quick)
-    total = sum(g.cpu_min for g in chosen)
-    print(f"[pages] {len(chosen)} generators, about {total:.0f} CPU-min measured", flush=True)
+    chosen = select(args.only, args.quick, args.stale)
+    total = sum(g.minutes for g in chosen)
+    print(f"[pages] {len(chosen)} generators, about {total:.0f} min measured", flush=True)
     for g in chosen:
-        print(f"  {g.name:32s} {g.cpu_min:6.1f} CPU-min  {', '.join(g.pages)}"
-              + (f"  ({g.note})" if g.note else ""))  # fmt: skip
+        why = stale(g)
+        print(f"  {g.name:32s} {g.minutes:5.1f} min ({g.measured}): {', '.join(g.pages)}; "
+              + ("stale: " + "; ".join(why) if why else "fresh"))  # fmt: skip
     if args.list:
         return 0
+    failed = []
     for g in chosen:
-        run(g)
-    return 0
+        if g.results and not args.keep_results:
+            move_aside(g.results)
+        if run(g) != 0:
+            failed.append(g.name)
+    if failed:
+        print(f"[pages] exited non-zero (their pages say why): {', '.join(failed)}")
+    return 1 if failed else 0
 
 
 if __name__ == "__main__":
