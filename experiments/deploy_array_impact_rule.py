@@ -309,6 +309,7 @@ def main(argv=None):
     if args.doc_only:
         with open(RESULT) as fh:
             result = json.load(fh)
+        pages.stored(result, RESULT)  # refuses a result without provenance
     else:
         record = pages.start(MEASURES, "python experiments/deploy_array_impact_rule.py")
         result = measure(args.repeats)

@@ -152,9 +152,10 @@ def run_family(family, budget_min):
     records.setdefault("_meta", {"versions": run_metadata(), "machine": machine_description()})
     record = pages.start(MEASURES, f"python experiments/robustness.py {family}")
     earlier = records["_meta"].get("provenance")
-    if earlier and any(name in records for name in cases):  # cases kept from earlier runs
-        kept = {earlier["commit"], *earlier.get("runs_at", [])} - {record["commit"]}
-        record["runs_at"] = sorted(kept)
+    if any(name in records for name in cases):  # cases kept from earlier runs
+        # (results stored before the script recorded provenance: an unknown commit)
+        kept = {earlier["commit"], *earlier.get("runs_at", [])} if earlier else {"unknown"}
+        record["runs_at"] = sorted(kept - {record["commit"]})
     start = time.process_time()
     for name, case in cases.items():
         if name in records:
@@ -287,7 +288,8 @@ def write_docs(record):
         ("long", ["base, 20 s"], "No derivative over 20 s."),
     ):
         records = _load(family)
-        made = records.get("_meta", {}).get("provenance", record)
+        # Results stored before the script recorded provenance were made at an unknown commit.
+        made = records.get("_meta", {}).get("provenance", {**record, "runs_at": ["unknown"]})
         if not any(name in records for name in names):
             made = record
             text = (

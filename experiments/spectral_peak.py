@@ -547,6 +547,7 @@ def main(argv=None):
     if args.doc_only:
         with open(result_path) as fh:
             result = json.load(fh)
+        pages.stored(result, result_path)  # refuses a result without provenance
     else:
         record = pages.start(MEASURES, "python experiments/spectral_peak.py --rerun")
         kept = run_all(record["commit"], rerun=args.rerun)

@@ -207,3 +207,14 @@ def part(text: str, block: str | None) -> str | None:
         if name == block:
             return f"<!-- BEGIN {name} -->{body}<!-- END {name} -->"
     return None
+
+
+def stored(result: dict, source: str) -> dict:
+    """The provenance record a stored result (`--doc-only`) was made with; a result stored
+    before its generator recorded one is refused: rerun the generator."""
+    if "provenance" not in result:
+        raise RuntimeError(
+            f"{source} records no provenance (stored before its generator recorded one): "
+            "rerun without --doc-only"
+        )
+    return result["provenance"]

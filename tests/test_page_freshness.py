@@ -200,6 +200,8 @@ def test_generators_refuse_a_dirty_tree_and_record_what_they_measure(repo, monke
     assert pages.start(["code.py"], "x", root=str(repo))["dirty"] is True
     with pytest.raises(FileNotFoundError, match="typo.py"):
         pages.start(["typo.py"], "x", root=str(repo))
+    with pytest.raises(RuntimeError, match="records no provenance"):  # an old --doc-only cache
+        pages.stored({"rows": []}, "results/x.json")
 
 
 def test_a_written_block_reads_back(tmp_path, repo):
