@@ -4,7 +4,7 @@
   the page `DIR/performance.md` with `DIR/bench/work_precision.{json,png}` and
   `DIR/bench/targets.json` (DIR: `docs`, or `results/bench_quick` with `--quick`).
 * `part NAME --json FILE [--quick]`: one measurement (work-precision, andrews, batch, ceiling,
-  gradient, simulate) into FILE; used by `all`.
+  gradient, simulate, whole-process) into FILE; used by `all`.
 * `tour [--allow-dirty]`: the README tour's commands timed, its `Time:` lines rewritten
   (`benchmarks/tour.py`); `all` runs it last when it writes to `docs`.
 """
@@ -33,7 +33,7 @@ MEASURES = [
     "tests/data/slider_crank_reference.npz",
 ]
 PINNED = ("work-precision", "andrews", "batch", "ceiling", "gradient")  # one core, both sides
-PARTS = ("work-precision", "andrews", "batch", "ceiling", "gradient", "simulate")
+PARTS = ("work-precision", "andrews", "batch", "ceiling", "gradient", "simulate", "whole-process")
 CUT = [
     "Work–precision over the first 4 ms of slider_crank only (the reference fixture's fine "
     "grid), not two revolutions, and not deploy_array (its implicit configurations take hours).",
@@ -64,6 +64,10 @@ def _part(name: str, quick: bool) -> dict:
         return targets.gradient(t_end=0.02 if quick else 0.2, repeats=1 if quick else 2)
     if name == "simulate":
         return targets.simulate_cold_warm()
+    if name == "whole-process":
+        from .whole_process import measure as whole_process
+
+        return whole_process()
     raise ValueError(f"part {name!r} is invalid; valid: {', '.join(PARTS)}")
 
 

@@ -1,0 +1,159 @@
+"""What a user waits for, as whole processes (issue 32's targets; `python -m benchmarks part
+whole-process`): interpreter start, imports, build, compile or cache load, solve, files.
+
+* `jaxdeploy simulate slider_crank --rtol 1e-8 --atol 1e-11` against the scipy user's script
+  (`benchmarks/slider_crank_script.py`: LSODA on the minimal-coordinate model, the same two
+  revolutions and 2001 saved times, no plots) at the loosest LSODA tolerance (atol = 1e-3 rtol,
+  as the work–precision bench) whose slider error over the first 4 ms is at or below ours,
+  both against the independent reference (`tests/data/slider_crank_reference.npz`). Each side
+  runs twice in new processes: the first with jaxdeploy's caches empty (a new
+  `JAXDEPLOY_CACHE_DIR`), the second with them filled by the first.
+* A Python script (README's "Python" example: `jd.enable_caches(...)`, the slider-crank with
+  clearance 1e-4 m, Tsit5 at rtol 1e-8) run twice in new processes with one cache folder: the
+  wall and CPU time from the end of `import jaxdeploy` to its first `simulate` result.
+
+Wall time from the parent (`time.perf_counter` around the child), CPU time of the child's
+process tree (`RUSAGE_CHILDREN`, user + system, which other jobs' load does not inflate).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+FLAGS = ("--rtol", "1e-8", "--atol", "1e-11")
+LSODA_RTOLS = (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11, 1e-12)
+SLIDER_X = 6  # the slider's x among slider_crank's coordinates (benchmarks/work_precision.py)
+
+# The README's Python example as a script that reports its own times (stdout, one JSON line).
+PYTHON_SCRIPT = """
+import json, sys, time
+began = time.perf_counter()
+import jaxdeploy as jd
+
+jd.enable_caches(sys.argv[1])
+imported, cpu = time.perf_counter(), time.process_time()
+scene = jd.get_scene("slider_crank")
+params = scene.resolve_params({"clearance": 1e-4})
+mechanism = scene.build(params)
+control = jd.StepControl("tsit5", rtol=1e-8, atol=1e-11, dt_max=1e-4)
+trajectory = jd.simulate(mechanism, scene.initial_state(params, mechanism), 0.024, control=control)
+trajectory.q.block_until_ready()
+print(json.dumps({"import_s": imported - began, "first_result_s": time.perf_counter() - imported,
+                  "first_result_cpu_s": time.process_time() - cpu,
+                  "status": trajectory.status()}))
+"""
+
+
+def _run(command, env, cwd=None) -> dict:
+    """`command` as a new process: its wall and CPU time [s] and its standard output."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    done = subprocess.run(command, env=env, cwd=cwd, capture_output=True, text=True)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(command)} failed: {done.stderr[-2000:]}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {"wall_s": wall, "cpu_s": cpu, "stdout": done.stdout}
+
+
+def _environment(cache: str | None) -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
+    env["JAXDEPLOY_CACHE_DIR"] = cache or "off"
+    return env
+
+
+def slider_error(t, x, ts_ref, x_ref) -> float:
+    """max |x − x_ref| [m] over the saved times within the reference's 0–4 ms (the saved
+    times are multiples of the reference's 1 µs grid)."""
+    t, x = np.asarray(t), np.asarray(x)
+    step = (ts_ref[-1] - ts_ref[0]) / (ts_ref.size - 1)
+    within = t <= ts_ref[-1] * (1 + 1e-12)
+    index = np.rint((t[within] - ts_ref[0]) / step).astype(int)
+    if not np.allclose(ts_ref[index], t[within], rtol=0, atol=1e-12):
+        raise ValueError("the saved times are not on the reference's grid")
+    return float(np.max(np.abs(x[within] - x_ref[index])))
+
+
+def slider_crank_vs_script(root: str = ".") -> dict:
+    from .scipy_peer import SliderCrankPeer
+    from .work_precision import load_reference
+
+    ts_ref, x_ref = load_reference(root)
+    out: dict = {"command": "jaxdeploy simulate slider_crank " + " ".join(FLAGS)}
+    with tempfile.TemporaryDirectory() as tmp:
+        env = _environment(os.path.join(tmp, "cache"))
+        runs = {}
+        for run in ("first", "second"):
+            folder = os.path.join(tmp, f"ours-{run}")
+            command = [sys.executable, "-m", "jaxdeploy.cli", "simulate", "slider_crank",
+                       *FLAGS, "--out", folder, "--quiet"]  # fmt: skip
+            runs[run] = _run(command, env)
+            with open(os.path.join(folder, "summary.json")) as f:
+                summary = json.load(f)
+            runs[run]["phases"] = {
+                "start_up_s": runs[run]["wall_s"] - summary["wall_time_s"],
+                **summary["phases"],
+            }
+            with np.load(os.path.join(folder, "trajectory.npz")) as data:
+                runs[run]["t"], runs[run]["x"] = data["t"], data["q"][:, SLIDER_X]
+        ours_error = slider_error(runs["first"]["t"], runs["first"]["x"], ts_ref, x_ref)
+        out["identical_runs"] = bool(
+            np.array_equal(runs["first"]["x"], runs["second"]["x"], equal_nan=True)
+        )
+        t_save = runs["first"]["t"]
+        for run in runs.values():
+            del run["t"], run["x"], run["stdout"]
+        out["ours"] = {**runs, "error_4ms_m": ours_error}
+        # The loosest LSODA tolerance as accurate as ours over the reference's 4 ms.
+        early = t_save[t_save <= ts_ref[-1] * (1 + 1e-12)]
+        rtol = LSODA_RTOLS[-1]
+        for candidate in LSODA_RTOLS:
+            x, _ = SliderCrankPeer().solve(early, "LSODA", candidate, 1e-3 * candidate)
+            if slider_error(early, x, ts_ref, x_ref) <= ours_error:
+                rtol = candidate
+                break
+        script = {}
+        for run in ("first", "second"):
+            path = os.path.join(tmp, f"script-{run}.npz")
+            command = [sys.executable, "-m", "benchmarks.slider_crank_script", "--rtol",
+                       repr(rtol), "--atol", repr(1e-3 * rtol), "--out", path]  # fmt: skip
+            script[run] = _run(command, _environment(None), cwd=root)
+            del script[run]["stdout"]
+            with np.load(path) as data:
+                script[run]["error_4ms_m"] = slider_error(data["t"], data["x"], ts_ref, x_ref)
+        out["script"] = {"method": "LSODA", "rtol": rtol, "atol": 1e-3 * rtol, **script}
+    for run in ("first", "second"):
+        out[f"{run}_ratio"] = out["ours"][run]["wall_s"] / out["script"][run]["wall_s"]
+        out[f"{run}_cpu_ratio"] = out["ours"][run]["cpu_s"] / out["script"][run]["cpu_s"]
+    return out
+
+
+def python_script_second_process() -> dict:
+    """The README's Python example in two new processes sharing one cache folder."""
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        env = _environment(None)
+        env.pop("JAXDEPLOY_CACHE_DIR")
+        for run in ("first", "second"):
+            done = _run([sys.executable, "-c", PYTHON_SCRIPT, os.path.join(tmp, "cache")], env)
+            report = json.loads(done["stdout"].strip().splitlines()[-1])
+            if report["status"] != "ok":
+                raise RuntimeError(f"the Python script's run failed: {report['status']}")
+            out[run] = {"wall_s": done["wall_s"], "cpu_s": done["cpu_s"], **report}
+    return out
+
+
+def measure(root: str = ".") -> dict:
+    return {
+        "slider_crank": slider_crank_vs_script(root),
+        "python_script": python_script_second_process(),
+    }
