@@ -19,6 +19,7 @@ experiments/identification_landscape.py`.
 
 from __future__ import annotations
 
+import json
 import os
 import time
 
@@ -55,6 +56,11 @@ MEASURES = [
 
 def main():
     record = pages.start(MEASURES, "python experiments/identification_landscape.py")
+    # The measurements are identification.py's: the commit (and tree) that made them counts.
+    with open(os.path.join(OUT, "summary.json"), encoding="utf-8") as fh:
+        made = json.load(fh)["versions"]["git"] or {"commit": "unknown", "dirty": True}
+    record["runs_at"] = sorted({made["commit"]} - {record["commit"]})
+    record["dirty"] = record["dirty"] or made["dirty"]
     data = load_measurements(os.path.join(OUT, "data.npz"))
     scene = DeployArray(clearance_joints={"J1": "panel1"})
     truth = scene.resolve_params()
