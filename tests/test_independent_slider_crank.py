@@ -56,13 +56,17 @@ def test_reference_case_is_the_scenes():
                 assert params[name] == pytest.approx(value, rel=1e-15), name
 
 
-def test_default_tolerance_within_1e5_m_over_4ms(reference):
+def test_default_tolerance_within_3p5e7_m_over_4ms(reference):
     """The scene's default step control (rtol 1e-6, atol 1e-9, dt_max 0.1 ms) on the default
-    solver: x_s within 1e-5 m (2 % of c) of the reference over the first 4 ms."""
+    solver (Tsit5 at this tolerance): x_s within 3.5e-7 m (0.07 % of c) of the reference over
+    the first 4 ms (11 impacts)."""
     scene, _ = slider_crank_scene(0.0)
     _, x_s, _, _ = slider_crank_run(0.0, 4e-3, **scene.default_control)
     error = np.max(np.abs(x_s - reference["mu0_fine"][:, 1]))
-    assert error < 1e-5, error
+    # Measured 1.73e-7 m at 938a945 (the bound was 1e-5 m, 58x that, from when generalized-α
+    # was the default and reached 4.1e-6 m): 2x the measured error, so a change that makes the
+    # default run twice as far from the reference fails here and not only in the slow set.
+    assert error < 3.5e-7, error
 
 
 TIGHT = {"rtol": 1e-10, "atol": 1e-13}
