@@ -23,7 +23,7 @@ from .scenes.base import Scene
 from .simulation import Trajectory, simulate
 from .solvers import GeneralizedAlpha
 from .solvers.step_control import FIELDS as STEP_FIELDS
-from .solvers.step_control import StepControl, as_step_control
+from .solvers.step_control import StepControl, as_step_control, scene_default_choice
 
 
 def step_control(scene: Scene, control: StepControl | Mapping | None = None) -> StepControl:
@@ -86,7 +86,8 @@ def run_scene(
     control, options = _control_and_options(scene, control, simulate_options)
     mechanism = scene.build(params)
     initial = scene.initial_state(params, mechanism)
-    return simulate(mechanism, initial, t_end, ts=ts, n_save=n_save, control=control, **options)
+    with scene_default_choice(control, scene.default_control):
+        return simulate(mechanism, initial, t_end, ts=ts, n_save=n_save, control=control, **options)
 
 
 def reference_run(scene: Scene, params: Mapping, ts, control: StepControl | None = None):
@@ -103,7 +104,8 @@ def reference_run(scene: Scene, params: Mapping, ts, control: StepControl | None
     ts = np.asarray(ts, dtype=float)
     control = ideal.default_control if control is None else control
     initial = ideal.initial_state(p, mechanism)
-    return simulate(mechanism, initial, float(ts[-1]), ts=ts, control=control)
+    with scene_default_choice(control, ideal.default_control):
+        return simulate(mechanism, initial, float(ts[-1]), ts=ts, control=control)
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ status that says when and why a run failed (never silent NaN).
 from __future__ import annotations
 
 import functools
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import diffrax as dfx
@@ -22,6 +22,7 @@ from . import _program_cache
 from ._validation import is_concrete
 from .mechanism import ConsistentState, Mechanism
 from .solvers import (
+    EpisodeLog,
     GeneralizedAlpha,
     LocateEvents,
     MechanismODESolver,
@@ -31,12 +32,24 @@ from .solvers import (
     TrackExtremes,
     state_norm,
     stop_at_non_finite,
+    tracked_episodes,
     tracked_extremes,
     untracked,
 )
-from .solvers.step_control import DEFAULT_MAX_STEPS
+from .solvers.episodes import DEFAULT_CAPACITY as DEFAULT_EPISODE_CAPACITY
+from .solvers.episodes import FIELDS as EPISODE_FIELDS
+from .solvers.episodes import UNITS as EPISODE_UNITS
+from .solvers.step_control import DEFAULT_MAX_STEPS, default_control, warn_solver_choice
 
-__all__ = ["PreparedRun", "StepControl", "Trajectory", "integrate", "prepare", "simulate"]
+__all__ = [
+    "ContactEpisodes",
+    "PreparedRun",
+    "StepControl",
+    "Trajectory",
+    "integrate",
+    "prepare",
+    "simulate",
+]
 
 
 class Trajectory(eqx.Module):
@@ -53,7 +66,10 @@ class Trajectory(eqx.Module):
     `extremes`: the run's extremes over every accepted step, independent of the output times
     (`jaxdeploy.mechanism.extremes_at`: `acceleration_min`/`_max` (n,), and with clearance
     joints `normal_force_max`/`penetration_max` (k,)). Both None for a trajectory assembled
-    without them.
+    without them. `episodes`: the clearance joints' contact episodes as logged during the run
+    (`jaxdeploy.solvers.EpisodeLog`, JAX arrays; read them with `contact_episodes()`), None
+    without clearance joints. `control`: the `StepControl` that ran (after `simulate`'s
+    defaults; None for a trajectory assembled without it).
     """
 
     ts: jax.Array
@@ -67,15 +83,30 @@ class Trajectory(eqx.Module):
     step_times: jax.Array | None = None
     t_reached: jax.Array | None = None
     extremes: dict | None = None
+    episodes: EpisodeLog | None = None
+    control: StepControl | None = eqx.field(static=True, default=None)
 
     @classmethod
     def from_states(
-        cls, ts, ys, result, stats, *, step_times=None, t_reached=None, extremes=None
-    ) -> Trajectory:
+        cls, ts, ys, result, stats, *, step_times=None, t_reached=None, extremes=None,
+        episodes=None, control=None,
+    ) -> Trajectory:  # fmt: skip
         """The trajectory of saved `MechanismState`s `ys` at times `ts` (what `integrate`
         returns for `SaveAt(ts=...)`)."""
         states = (ys.q, ys.v, ys.qdd, ys.lam, ys.memory)
-        return cls(ts, *states, result, stats, step_times, t_reached, extremes)
+        return cls(ts, *states, result, stats, step_times, t_reached, extremes, episodes, control)
+
+    def contact_episodes(self) -> list[ContactEpisodes]:
+        """The contact episodes of each clearance joint, in the order of
+        `mechanism.find(RevoluteClearance)` (empty without clearance joints): a
+        `ContactEpisodes` per joint, whose fields (numpy arrays over its episodes) are
+        `onset_time` [s], `impact_velocity` v⁻ [m/s], `separation_time` [s] (NaN if the contact
+        lasts to the end), `peak_force` [N] and `peak_force_time` [s], `peak_penetration` [m]
+        and `impulse` [N s] (`jaxdeploy.solvers.episodes` says how each is located). For a
+        differentiable version use the JAX arrays of `episodes`."""
+        if self.episodes is None:
+            return []
+        return ContactEpisodes.from_log(self.episodes)
 
     @property
     def ok(self) -> bool:
@@ -95,6 +126,47 @@ class Trajectory(eqx.Module):
         if self.ok:
             return "ok"
         return f"failed after t = {self.time_reached():.6g} s: {dfx.RESULTS[self.result]}"
+
+
+@dataclass(frozen=True)
+class ContactEpisodes:
+    """The contact episodes of one clearance joint (numpy arrays over its episodes, in the
+    order they began; units in `UNITS`). `total`: how many episodes the run had (more than
+    the arrays hold when it exceeded `simulate`'s `max_episodes`)."""
+
+    onset_time: np.ndarray
+    impact_velocity: np.ndarray
+    separation_time: np.ndarray
+    peak_force: np.ndarray
+    peak_force_time: np.ndarray
+    peak_penetration: np.ndarray
+    impulse: np.ndarray
+    total: int
+
+    UNITS = EPISODE_UNITS
+
+    @classmethod
+    def from_log(cls, log: EpisodeLog) -> list[ContactEpisodes]:
+        """One per joint of an `EpisodeLog`."""
+        counts = np.asarray(log.count)
+        out = []
+        for row, total in enumerate(counts):
+            kept = min(int(total), np.asarray(log.onset_time).shape[1])
+            fields = {f: np.asarray(getattr(log, f))[row, :kept] for f in EPISODE_FIELDS}
+            out.append(cls(**fields, total=int(total)))
+        return out
+
+    def __len__(self) -> int:
+        return self.onset_time.shape[0]
+
+    @property
+    def complete(self) -> bool:
+        """Whether every episode of the run is in the arrays."""
+        return len(self) == self.total
+
+    def rows(self) -> list[dict]:
+        """One dict per episode, `{field: float}`."""
+        return [{f: float(getattr(self, f)[i]) for f in EPISODE_FIELDS} for i in range(len(self))]
 
 
 class ReplaySteps(dfx.AbstractStepSizeController):
@@ -295,6 +367,7 @@ def simulate(
     locate_events=True,
     extreme_samples: int = 1,
     outputs: str = "all",
+    max_episodes: int = DEFAULT_EPISODE_CAPACITY,
 ) -> Trajectory:
     """Integrate `mechanism` from `initial` (a `consistent_state`) to `t_end`.
 
@@ -302,12 +375,27 @@ def simulate(
     - `control`: a `StepControl` (solver, tolerances, steps, event location), built once and
       shared with `simulate_batch`, `sweep`, `fit` and `optimize`. Or, instead of it, its
       fields as keywords (`solver`, `rtol`, `atol`, `dt`, `dt_min`, `dt_max`, `max_steps`,
-      `locate_events`), described below; giving both is refused.
+      `locate_events`), described below; giving both is refused. With neither (no `control`,
+      no `dt`, `rtol` or `atol`) the step control is chosen from the mechanism
+      (`jaxdeploy.solvers.default_control`): with clearance joints the Runge–Kutta path with
+      event location, `StepControl("auto", rtol=1e-9, atol=1e-12)` — Dopri8 at that rtol —,
+      the loosest tolerance at which every verified clearance case stayed within 1e-5 m of its
+      independent reference (slider_crank over two revolutions with and without friction,
+      docs/solver_by_tolerance.md: at rtol 1e-8 the friction case is off by 6e-5 to 1e-4 m
+      and miscounts its impacts; the pendulum on a clearance pivot of docs/tutorial.md,
+      tests/test_independent_pendulum.py); without clearance joints `StepControl("auto",
+      rtol=1e-8, atol=1e-11)` (Tsit5), which on Andrews' squeezer is 2000× more accurate than
+      generalized-α at the same rtol in 1/24 of the steps (docs/performance.md). A `solver`
+      given alone runs at those tolerances. `Trajectory.control` records what ran; a choice
+      measured to be less accurate for this mechanism (generalized-α with clearance joints at
+      rtol > 1e-12 or fixed steps) raises a `jaxdeploy.solvers.SolverChoiceWarning` that says
+      why.
     - `dt`: fixed step [s] (alone), or the first step of an adaptive run.
     - `rtol`, `atol`: adaptive step on the solver's error estimate (positions and velocities).
     - `n_save` / `ts`: output times (default: `n_save` equally spaced).
     - `solver`: a solver object, or a name from `jaxdeploy.solvers.SOLVER_NAMES`:
-      `"generalized_alpha"` (the default, `GeneralizedAlpha(rho_inf=0.8)`), or a diffrax method
+      `"generalized_alpha"` (`GeneralizedAlpha(rho_inf=0.8)`; the default of a `StepControl`
+      and of tolerances given without a solver), or a diffrax method
       (`"kvaerno5"`, `"kvaerno3"`, `"tsit5"`, `"dopri8"`, …) on the index-1 ODE with coordinate
       projection (`MechanismODESolver`); implicit ones take their Newton tolerances from
       `rtol`/`atol`.
@@ -347,6 +435,9 @@ def simulate(
       4001 saved times over 4 ms were about a third of a Tsit5 run's cost with `"all"`
       (`benchmarks/work_precision.py`).
 
+    - `max_episodes`: contact episodes kept per clearance joint (`Trajectory.
+      contact_episodes()`; the count of all of them is kept too).
+
     **Returns:** a `Trajectory`; check `.ok` / `.status()`: a failed solve keeps the states it
     finished and says when and why it stopped.
     """
@@ -374,6 +465,7 @@ def simulate(
         replay_steps=replay_steps,
         locate_events=locate_events,
         extreme_samples=extreme_samples,
+        max_episodes=max_episodes,
     )
     # Through the program cache when the command line enabled it (a plain call otherwise): a
     # second process with the same composition and shapes skips tracing and lowering. A
@@ -402,6 +494,8 @@ def simulate(
         step_times=run.step_times,
         t_reached=end[0],
         extremes=tracked_extremes(sol.solver_state),
+        episodes=tracked_episodes(sol.solver_state),
+        control=run.control,
     )
 
 
@@ -418,6 +512,7 @@ class PreparedRun(NamedTuple):
     max_steps: int
     adjoint: object
     step_times: jax.Array | None
+    control: StepControl | None = None
 
 
 def prepare(
@@ -441,12 +536,14 @@ def prepare(
     replay_steps=False,
     locate_events=True,
     extreme_samples=1,
+    max_episodes=DEFAULT_EPISODE_CAPACITY,
 ) -> PreparedRun:
     """Validate `simulate`'s arguments (the same keywords) and build its solver, step-size
     controller, initial state and times: `simulate` is `integrate` of these pieces. Public
     for callers that must integrate exactly as `simulate` does while driving the loop
     themselves (`integrate`)."""
     control = _step_control(
+        mechanism,
         control,
         solver=solver,
         rtol=rtol,
@@ -457,6 +554,7 @@ def prepare(
         max_steps=max_steps,
         locate_events=locate_events,
     )
+    warn_solver_choice(mechanism, control, stacklevel=4)
     solver = control.make_solver()
     dt_min, locate_events = control.dt_min, control.locate_events
     # The step is data, not part of the compiled program: changing it does not recompile.
@@ -464,7 +562,13 @@ def prepare(
     if not control.adaptive and isinstance(solver, GeneralizedAlpha):
         solver = replace(solver, estimate_error=False)
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
-    solver = TrackExtremes(_inner_scan_kind_for(adjoint, solver), samples=extreme_samples)
+    if not (isinstance(max_episodes, int) and max_episodes > 0):
+        raise ValueError(f"max_episodes = {max_episodes!r} is invalid: it must be an integer > 0")
+    solver = TrackExtremes(
+        _inner_scan_kind_for(adjoint, solver),
+        samples=extreme_samples,
+        episode_capacity=max_episodes,
+    )
     y0 = MechanismState(initial.q, initial.v, initial.qdd, initial.lam, initial.memory)
     ts = _save_times(t0, t_end, n_save, ts)
     # Times are data too: a new t_end or t0 does not recompile.
@@ -492,15 +596,19 @@ def prepare(
         step_times = _replay_times(replay_steps, t0, t_end)
         controller = ReplaySteps(step_times, dfx.RESULTS.successful)
     return PreparedRun(
-        y0, t0, t_end, dt0, ts, solver, controller, control.max_steps, adjoint, step_times
+        y0, t0, t_end, dt0, ts, solver, controller, control.max_steps, adjoint, step_times, control
     )
 
 
-def _step_control(control, **keywords) -> StepControl:
+def _step_control(mechanism, control, **keywords) -> StepControl:
     """`simulate`'s step control: `control`, or a `StepControl` of its keyword arguments
-    (never both: which would win is a guess)."""
+    (never both: which would win is a guess), or, when neither gives a step (no `dt`, `rtol`
+    or `atol`), the mechanism's `default_control` with the keywords given applied."""
     if control is None:
-        return StepControl(**{k: v for k, v in keywords.items() if v is not None})
+        given = {k: v for k, v in keywords.items() if v is not None}
+        if not {"dt", "rtol", "atol"} & set(given):
+            return default_control(mechanism).replace(**given)
+        return StepControl(**given)
     given = [k for k, v in keywords.items() if v is not None]
     given = [k for k in given if k != "max_steps" or keywords[k] != DEFAULT_MAX_STEPS]
     given = [k for k in given if k != "locate_events" or keywords[k] is not True]

@@ -255,6 +255,7 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
     from ..analysis import analysis_class
     from ..io import atomic_write_json, atomic_write_npz, prepare_output_dir, strict_json
     from ..simulation import simulate
+    from ..solvers.step_control import scene_default_choice
     from ._results import run_quantities, units_of
 
     prepare_output_dir(out, args.overwrite)
@@ -277,7 +278,10 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
 
     label = f"integrate to t_end = {t_end:g} s ({control.solver_name()})"
     with phases.phase("integrate", label, split_compile=True):
-        with _program_cache.when_traced(None if beside is None else beside.start):
+        with (
+            _program_cache.when_traced(None if beside is None else beside.start),
+            scene_default_choice(control, scene.default_control),
+        ):
             trajectory = simulate(
                 mechanism,
                 initial,

@@ -1,7 +1,14 @@
 """Time integrators for mechanisms."""
 
+from .episodes import EpisodeLog, step_maximum
 from .event_location import LocateEvents
-from .extremes import TrackedState, TrackExtremes, tracked_extremes, untracked
+from .extremes import (
+    TrackedState,
+    TrackExtremes,
+    tracked_episodes,
+    tracked_extremes,
+    untracked,
+)
 from .generalized_alpha import (
     AlphaCoefficients,
     GeneralizedAlpha,
@@ -17,13 +24,14 @@ from .index1 import (
 )
 from .non_finite import stop_at_non_finite
 from .registry import AUTO_TIGHT_RTOL, SOLVER_NAMES, resolve_solver, solver_by_name
-from .step_control import StepControl
+from .step_control import SolverChoiceWarning, StepControl, default_control, solver_advice
 from .term import MechanismState, MechanismTerm
 
 __all__ = [
     "AUTO_TIGHT_RTOL",
     "SOLVER_NAMES",
     "AlphaCoefficients",
+    "EpisodeLog",
     "GeneralizedAlpha",
     "GeneralizedAlphaState",
     "Index1Field",
@@ -31,16 +39,21 @@ __all__ = [
     "MechanismODESolver",
     "MechanismState",
     "MechanismTerm",
+    "SolverChoiceWarning",
     "StepControl",
+    "default_control",
+    "solver_advice",
     "chung_hulbert",
     "project_onto_constraints",
     "resolve_solver",
     "solver_by_name",
     "stabilised_accelerations",
     "state_norm",
+    "step_maximum",
     "stop_at_non_finite",
     "TrackExtremes",
     "TrackedState",
+    "tracked_episodes",
     "tracked_extremes",
     "untracked",
 ]

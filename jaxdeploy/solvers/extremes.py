@@ -37,14 +37,18 @@ import jax
 import jax.numpy as jnp
 
 from ..mechanism import extremes_at, merge_extremes
+from .episodes import DEFAULT_CAPACITY, init_log, log_step
 from .term import MechanismTerm, mechanism_of
 
 
 class TrackedState(NamedTuple):
-    """The wrapped solver's state and the extremes so far (`extremes_at`'s keys)."""
+    """The wrapped solver's state, the extremes so far (`extremes_at`'s keys) and the
+    clearance joints' contact episodes so far (`jaxdeploy.solvers.episodes.EpisodeLog`, None
+    without clearance joints)."""
 
     inner: object
     extremes: dict
+    episodes: object = None
 
 
 class TrackExtremes(dfx.AbstractWrappedSolver):
@@ -56,10 +60,13 @@ class TrackExtremes(dfx.AbstractWrappedSolver):
     - `solver`: the solver to wrap.
     - `samples`: equally spaced interior points of each step's dense output evaluated as
       well (static; default 1, the midpoint; 0: step ends only).
+    - `episode_capacity`: contact episodes kept per clearance joint
+      (`jaxdeploy.solvers.episodes`; static).
     """
 
     solver: dfx.AbstractSolver
     samples: int = eqx.field(static=True, default=1)
+    episode_capacity: int = eqx.field(static=True, default=DEFAULT_CAPACITY)
 
     term_structure: ClassVar = MechanismTerm
 
@@ -78,8 +85,10 @@ class TrackExtremes(dfx.AbstractWrappedSolver):
         return self.solver.error_order(terms)
 
     def init(self, terms, t0, t1, y0, args):
-        extremes = extremes_at(mechanism_of(terms), y0.q, y0.v, y0.qdd, y0.memory)
-        return TrackedState(self.solver.init(terms, t0, t1, y0, args), extremes)
+        mech = mechanism_of(terms)
+        extremes = extremes_at(mech, y0.q, y0.v, y0.qdd, y0.memory)
+        episodes = init_log(mech, t0, y0, self.episode_capacity)
+        return TrackedState(self.solver.init(terms, t0, t1, y0, args), extremes, episodes)
 
     def func(self, terms, t0, y0, args):
         return self.solver.func(terms, t0, y0, args)
@@ -92,8 +101,18 @@ class TrackExtremes(dfx.AbstractWrappedSolver):
         extremes = merge_extremes(
             solver_state.extremes, extremes_at(mech, y1.q, y1.v, y1.qdd, y1.memory)
         )
+        dense = self.interpolation_cls(t0=t0, t1=t1, **dense_info)
+        episodes = log_step(
+            solver_state.episodes,
+            mech,
+            t0,
+            t1,
+            y0,
+            y1,
+            lambda t: _motion(dense, t),
+            self.episode_capacity,
+        )
         if self.samples:
-            dense = self.interpolation_cls(t0=t0, t1=t1, **dense_info)
 
             def velocity(t):
                 return _motion(dense, t)[1]
@@ -103,7 +122,7 @@ class TrackExtremes(dfx.AbstractWrappedSolver):
                 q, v, memory = _motion(dense, t)
                 qdd = jax.jvp(velocity, (t,), (jnp.ones_like(t),))[1]
                 extremes = merge_extremes(extremes, extremes_at(mech, q, v, qdd, memory))
-        return y1, y_error, dense_info, TrackedState(inner, extremes), result
+        return y1, y_error, dense_info, TrackedState(inner, extremes, episodes), result
 
 
 def _motion(dense, t):
@@ -119,6 +138,13 @@ def tracked_extremes(solver_state) -> dict | None:
     """The extremes in a final solver state (`TrackedState`), or None if it has none."""
     if isinstance(solver_state, TrackedState):
         return solver_state.extremes
+    return None
+
+
+def tracked_episodes(solver_state):
+    """The contact-episode log in a final solver state (`TrackedState`), or None."""
+    if isinstance(solver_state, TrackedState):
+        return solver_state.episodes
     return None
 
 

@@ -13,7 +13,9 @@ which a clearance joint's impact velocity is set is redone to end just past that
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -22,6 +24,8 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from .._validation import check_nonnegative, check_positive, check_range, is_concrete
+from ..mechanism import RevoluteClearance
+from .generalized_alpha import GeneralizedAlpha
 from .registry import (
     AUTO_TIGHT_RTOL,
     AUTO_TIGHT_SOLVER,
@@ -271,3 +275,103 @@ def as_step_control(control, base: StepControl | None = None) -> StepControl:
     if base is None:
         return StepControl(**dict(control or {}))
     return base.updated(control)
+
+
+# --- the step control a mechanism gets when the caller gives none -------------------------------
+
+# With clearance joints: the Runge–Kutta path with event location, the method chosen by the
+# tolerance ("auto": Dopri8 below AUTO_TIGHT_RTOL), at rtol 1e-9, atol 1e-12 (atol = 1e-3 rtol, as
+# measured). rtol 1e-9 is the loosest tolerance at which every verified clearance case stayed
+# within 1e-5 m of its independent reference over its whole horizon
+# (docs/solver_by_tolerance.md, slider_crank over two revolutions, 26 and 43 impacts: Dopri8 at
+# rtol 1e-9 1.1e-9 m without friction and 3.9e-7 m with μ = 0.01; at rtol 1e-8 the friction
+# case is off by 5.7e-5 m (Dopri8) and 1.1e-4 m (Tsit5) and finds 42 or 44 impacts), and the
+# tutorial's pendulum on a clearance pivot over its 8 impacts (tests/independent/
+# pendulum_clearance.py: 1.3e-13 m, every episode found; tests/test_independent_pendulum.py).
+# Event location ends a step on every contact onset and separation, so v⁻ is as accurate as
+# the state.
+CLEARANCE_DEFAULT = StepControl("auto", rtol=1e-9, atol=1e-12)
+# Without clearance joints the equations are smooth and the measurements favour the Runge–Kutta
+# path too: on Andrews' squeezer (docs/performance.md) Tsit5 at rtol 1e-8 is within 2.1e-9
+# (relative) of the Test Set's solution in 256 steps, where generalized-α at the same rtol is off
+# by 4.1e-6 after 6163 steps.
+SMOOTH_DEFAULT = StepControl("auto", rtol=1e-8, atol=1e-11)
+
+# Generalized-α on a mechanism with clearance joints is measured less accurate than the
+# Runge–Kutta path at every tolerance looser than this one (docs/solver_by_tolerance.md): at
+# rtol 1e-6 … 1e-8 over two slider_crank revolutions its error is of the order of the clearance
+# (5.4e-4, 3.4e-4, 6.4e-4 m against Tsit5's 7.0e-5, 1.5e-5, 2.5e-6 m) and it counts 28 impacts
+# where there are 26; at rtol 1e-10 (4 ms) 9.4e-9 m against Tsit5's 2.6e-11 m; at rtol 1e-12
+# both are within 5e-10 m. On the tutorial's pendulum (40 ms, 8 impacts) it failed at rtol 1e-6
+# (non-finite after 523 405 steps) and at 1e-10 (2 000 000 steps reached at t = 0.026 s) and was
+# off by 9.1e-8 … 4.4e-9 m at rtol 1e-7 … 1e-9, where Dopri8 at the same rtol was within
+# 1.3e-11 … 1.3e-13 m in 299 … 385 steps. Fixed steps are not error-controlled at all.
+GENERALIZED_ALPHA_CLEARANCE_RTOL = 1e-12
+
+
+class SolverChoiceWarning(UserWarning):
+    """A step control known, by measurement, to be less accurate for this mechanism than the
+    default (`default_control`)."""
+
+
+def default_control(mechanism) -> StepControl:
+    """The step control `simulate` uses for `mechanism` when the caller gives none:
+    `CLEARANCE_DEFAULT` (`"auto"`, rtol 1e-9, atol 1e-12, event location) for a mechanism with
+    clearance joints, `SMOOTH_DEFAULT` (`"auto"`, rtol 1e-8, atol 1e-11) without; the
+    measurements behind each are beside their definitions (solvers/step_control.py)."""
+    return CLEARANCE_DEFAULT if _has_clearance_joints(mechanism) else SMOOTH_DEFAULT
+
+
+def _has_clearance_joints(mechanism) -> bool:
+    return bool(mechanism.find(RevoluteClearance))
+
+
+def _is_generalized_alpha(solver) -> bool:
+    return solver == "generalized_alpha" or isinstance(solver, GeneralizedAlpha)
+
+
+def solver_advice(mechanism, control: StepControl) -> str | None:
+    """Why `control` is known to be less accurate for `mechanism` than the default, or None:
+    generalized-α on a mechanism with clearance joints with fixed steps or at an rtol looser
+    than `GENERALIZED_ALPHA_CLEARANCE_RTOL` (the measurements are beside it)."""
+    if not _is_generalized_alpha(control.resolved_solver()):
+        return None
+    if not _has_clearance_joints(mechanism):
+        return None
+    if control.adaptive:
+        rtol = 1e-6 if control.rtol is None else control.rtol
+        if not is_concrete(rtol) or float(rtol) <= GENERALIZED_ALPHA_CLEARANCE_RTOL:
+            return None
+        setting = f"rtol {float(rtol):g}"
+    else:
+        setting = f"fixed steps of {float(control.dt):g} s"
+    return (
+        f"generalized-α with {setting} on a mechanism with clearance joints: measured less "
+        "accurate than the Runge–Kutta path with event location at every rtol above "
+        f"{GENERALIZED_ALPHA_CLEARANCE_RTOL:g} (slider_crank, two revolutions: x_s off by "
+        "3.4e-4 to 6.4e-4 m at rtol 1e-6 to 1e-8, about the clearance, and 28 impacts found "
+        "where there are 26, against Tsit5's 7.0e-5 to 2.5e-6 m; docs/solver_by_tolerance.md; "
+        "a pendulum on a clearance pivot: failed at rtol 1e-6 and 1e-10, 7e3 to 4e4 × "
+        "Dopri8's error at 1e-7 to 1e-9; docs/tutorial.md). "
+        "Leave the step control out for the default (solver 'auto', rtol 1e-9, atol 1e-12: "
+        "jaxdeploy.solvers.default_control), or give a tighter rtol"
+    )
+
+
+def warn_solver_choice(mechanism, control: StepControl, stacklevel: int = 3) -> None:
+    """`SolverChoiceWarning` with `solver_advice`'s reason, if it has one."""
+    advice = solver_advice(mechanism, control)
+    if advice is not None:
+        warnings.warn(advice, SolverChoiceWarning, stacklevel=stacklevel)
+
+
+@contextlib.contextmanager
+def scene_default_choice(control: StepControl, scene_default: StepControl):
+    """Inside it, no `SolverChoiceWarning` for `control` when it is `scene_default`: a scene's
+    own default step control was chosen and verified for that scene (the impact scene's
+    generalized-α against Johnson's closed forms, docs/verification.md), so only a step control
+    the user changed is judged."""
+    with warnings.catch_warnings():
+        if control == scene_default:
+            warnings.simplefilter("ignore", SolverChoiceWarning)
+        yield

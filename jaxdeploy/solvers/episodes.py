@@ -1,0 +1,255 @@
+"""Contact episodes of the clearance joints, logged over every accepted step of a run.
+
+An episode of a clearance joint runs from the onset of a contact (the journal's surface
+reaches the bearing's: δ rises through the elastic law's onset, 0 for Hertz) to its separation.
+Per episode the log keeps
+
+* `onset_time` [s] and `impact_velocity` v⁻ [m/s]: where the joint's memory located the onset
+  inside the step (`RevoluteClearance`'s `event_fraction`, on the step's interpolant of the
+  eccentricity) and the v⁻ it latched there; with adaptive steps and event location the step
+  itself ends just past the onset (`LocateEvents`), so both are as accurate as the state;
+* `separation_time` [s] (NaN while the contact lasts at the end of the run), located likewise;
+* `peak_force` [N] and `peak_force_time` [s]: the largest net normal force of the episode,
+  maximised over each step's dense output (`step_maximum`), not sampled at step ends;
+* `peak_penetration` [m]: the largest δ = |e| − c, maximised the same way;
+* `impulse` [N s]: ∫ F_N dt over the episode, Simpson's rule on each step's dense output.
+
+The log is part of the solver's state (`TrackExtremes` folds it), so a rejected step changes
+nothing and the result does not depend on the output times. Episodes are numbered per joint in
+the order they begin; the first `capacity` of each joint are kept (`count` says how many there
+were). A contact that begins and ends inside one step is not seen: with event location a step
+ends at every onset, with fixed steps such a graze is lost (as in any step-end test).
+
+`step_maximum` is the refinement by itself — the largest value of a scalar function of time on
+one step, located on samples and refined by Newton's method on its time derivative — written as
+a pure JAX function of the step's interpolant, so that gradients of a peak can reuse it: the
+location is gradient-stopped and the value differentiates by the envelope theorem (at an
+interior maximum df/dt = 0, so the peak's derivative with respect to a parameter is ∂f/∂θ at
+the peak's time; Milgrom & Segal, *Econometrica* 70 (2002) 583).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from ..mechanism import RevoluteClearance
+
+DEFAULT_CAPACITY = 128  # episodes kept per clearance joint
+SAMPLES = 8  # equal intervals of a step sampled to bracket its maximum (Simpson needs even)
+NEWTON = 4  # Newton iterations on df/dt = 0 from the best sample
+
+FIELDS = (
+    "onset_time",
+    "impact_velocity",
+    "separation_time",
+    "peak_force",
+    "peak_force_time",
+    "peak_penetration",
+    "impulse",
+)
+UNITS = {
+    "onset_time": "s",
+    "impact_velocity": "m/s",
+    "separation_time": "s",
+    "peak_force": "N",
+    "peak_force_time": "s",
+    "peak_penetration": "m",
+    "impulse": "N s",
+}
+
+
+class EpisodeLog(NamedTuple):
+    """Per clearance joint (first axis, the order of `mechanism.find(RevoluteClearance)`):
+    `count` (k,) episodes begun so far, and each of `FIELDS` as a (k, capacity) array (NaN in
+    slots not reached)."""
+
+    count: jax.Array
+    onset_time: jax.Array
+    impact_velocity: jax.Array
+    separation_time: jax.Array
+    peak_force: jax.Array
+    peak_force_time: jax.Array
+    peak_penetration: jax.Array
+    impulse: jax.Array
+
+
+def step_maximum(f, t0, t1, samples: int = SAMPLES, iterations: int = NEWTON):
+    """`(t*, f(t*), values)`: the largest value of the scalar function `f(t)` on [t0, t1].
+
+    `f` is evaluated at `samples` + 1 equally spaced times (`values`, the ends included), then
+    `iterations` safeguarded Newton steps on f'(t) = 0 (first and second derivatives by
+    forward mode, `jax.jvp`) start from the best sample and stay inside the interval around it;
+    the result is never worse than the best sample (a kink, e.g. a contact's onset or the
+    `max(0, ·)` of a damped law, then keeps the sample). `t*` is gradient-stopped; `f(t*)`
+    differentiates with respect to whatever `f` closes over by the envelope theorem (module
+    docstring). Pure JAX: jits, vmaps and differentiates.
+    """
+    grid = jnp.linspace(0.0, 1.0, samples + 1)
+    times = jax.lax.stop_gradient(t0 + (t1 - t0) * grid)
+    values = jax.vmap(f)(times)
+    k = jnp.argmax(jax.lax.stop_gradient(values))
+    lo = times[jnp.maximum(k - 1, 0)]
+    hi = times[jnp.minimum(k + 1, samples)]
+
+    def slopes(t):
+        def derivative(s):
+            return jax.jvp(f, (s,), (jnp.ones_like(s),))[1]
+
+        return jax.jvp(derivative, (t,), (jnp.ones_like(t),))
+
+    def newton(_, t):
+        slope, curvature = slopes(t)
+        step = slope / jnp.where(curvature < 0, curvature, -jnp.inf)
+        candidate = t - step
+        return jnp.where((candidate > lo) & (candidate < hi), candidate, t)
+
+    best = jax.lax.stop_gradient(times[k])
+    refined = jax.lax.stop_gradient(jax.lax.fori_loop(0, iterations, newton, best))
+    t_star = jnp.where(f(refined) > values[k], refined, best)
+    t_star = jax.lax.stop_gradient(t_star)
+    return t_star, f(t_star), values
+
+
+def simpson(values, t0, t1):
+    """∫ f dt over [t0, t1] from f at an even number of equal intervals (Simpson's rule)."""
+    n = values.shape[0] - 1
+    weights = jnp.ones(n + 1).at[1:-1:2].set(4.0).at[2:-1:2].set(2.0)
+    return (t1 - t0) / (3.0 * n) * jnp.dot(weights, values)
+
+
+def _joint_state(mechanism, index, memory):
+    """`(in_contact, event_fraction, impact_velocity)` of joint `index` from its memory, or
+    None for a joint whose law keeps no v⁻ memory."""
+    m = memory[index]
+    if not isinstance(m, dict) or "in_contact" not in m:
+        return None
+    return m["in_contact"] > 0.5, m["event_fraction"], m["impact_velocity"]
+
+
+def _contact_at(mechanism, index, q, v, step_memory):
+    """(F_N, δ) of joint `index` at `(q, q̇)` with the step's memory of the joint."""
+    joint = mechanism.elements[index]
+    kin = mechanism.kinematics(q, v)
+    fn, _, geometry = joint.contact_forces(kin, step_memory)
+    return fn, geometry.penetration
+
+
+def _penetration_state(mechanism, index, q, v):
+    joint = mechanism.elements[index]
+    g = joint.geometry(mechanism.kinematics(q, v))
+    return g.penetration > _onset(joint), g.penetration, g.penetration_rate
+
+
+def _onset(joint):
+    """The penetration at which the joint's elastic law starts to push (0 for Hertz)."""
+    return joint.normal.elastic.onset_penetration()
+
+
+def init_log(mechanism, t0, y0, capacity: int = DEFAULT_CAPACITY) -> EpisodeLog | None:
+    """The log at the start of a run (a joint already in contact opens its first episode at
+    `t0`); None for a mechanism without clearance joints."""
+    joints = mechanism.find(RevoluteClearance)
+    if not joints:
+        return None
+    k = len(joints)
+    nan = jnp.full((k, capacity), jnp.nan, dtype=y0.q.dtype)
+    log = EpisodeLog(jnp.zeros((k,), dtype=jnp.int32), *([nan] * len(FIELDS)))
+    for row, index in enumerate(joints):
+        state = _joint_state(mechanism, index, y0.memory)
+        if state is None:
+            now_in, _, rate = _penetration_state(mechanism, index, y0.q, y0.v)
+            v_minus = jnp.maximum(rate, 0.0)
+        else:
+            now_in, _, v_minus = state
+        log = _begin(log, row, now_in, t0, v_minus, capacity)
+    return log
+
+
+def _begin(log, row, began, time, v_minus, capacity):
+    slot = jnp.minimum(log.count[row], capacity - 1)
+    writable = began & (log.count[row] < capacity)
+
+    def put(field, value):
+        old = getattr(log, field)
+        return old.at[row, slot].set(jnp.where(writable, value, old[row, slot]))
+
+    log = log._replace(
+        onset_time=put("onset_time", time),
+        impact_velocity=put("impact_velocity", v_minus),
+        peak_force=put("peak_force", 0.0),
+        peak_penetration=put("peak_penetration", -jnp.inf),
+        impulse=put("impulse", 0.0),
+    )
+    return log._replace(count=log.count.at[row].add(began.astype(log.count.dtype)))
+
+
+def log_step(log, mechanism, t0, t1, y0, y1, motion, capacity: int = DEFAULT_CAPACITY):
+    """The log after an accepted step from `(t0, y0)` to `(t1, y1)`; `motion(t)` gives the
+    step's dense output `(q, q̇, memory)` at `t`."""
+    if log is None:
+        return None
+    h = t1 - t0
+    for row, index in enumerate(mechanism.find(RevoluteClearance)):
+        joint = mechanism.elements[index]
+        before = _joint_state(mechanism, index, y0.memory)
+        if before is not None:
+            was_in = before[0]
+            now_in, fraction, v_minus = _joint_state(mechanism, index, y1.memory)
+            fraction = jnp.clip(fraction, 0.0, 1.0)
+            step_memory = joint.memory_for_step(y0.memory[index], mechanism.kinematics(y0.q, y0.v))
+        else:
+            # A law without v⁻ memory: in contact by δ at the step's ends, the crossing
+            # interpolated linearly (not located).
+            was_in, d0, r0 = _penetration_state(mechanism, index, y0.q, y0.v)
+            now_in, d1, r1 = _penetration_state(mechanism, index, y1.q, y1.v)
+            level = _onset(joint)
+            fraction = jnp.clip((level - d0) / jnp.where(d1 != d0, d1 - d0, 1.0), 0.0, 1.0)
+            v_minus = jnp.maximum(r0 + fraction * (r1 - r0), 0.0)
+            step_memory = y0.memory[index]
+        began, ended = (~was_in) & now_in, was_in & (~now_in)
+        log = _begin(log, row, began, t0 + fraction * h, v_minus, capacity)
+        slot = jnp.clip(log.count[row] - 1, 0, capacity - 1)
+        open_ = (log.count[row] > 0) & (log.count[row] <= capacity)
+        touched = (was_in | now_in) & open_
+
+        def peaks(joint_index=index, memory=step_memory):
+            def force(t):
+                q, v, _ = motion(t)
+                return _contact_at(mechanism, joint_index, q, v, memory)[0]
+
+            def penetration(t):
+                q, v, _ = motion(t)
+                return _contact_at(mechanism, joint_index, q, v, memory)[1]
+
+            t_force, f_max, forces = step_maximum(force, t0, t1)
+            _, d_max, _ = step_maximum(penetration, t0, t1)
+            return t_force, f_max, d_max, simpson(forces, t0, t1)
+
+        def nothing():
+            zero = jnp.zeros((), dtype=y0.q.dtype)
+            return t0 + zero, zero, jnp.full((), -jnp.inf, dtype=zero.dtype), zero
+
+        t_force, f_max, d_max, impulse = jax.lax.cond(touched, peaks, nothing)
+        row_force = log.peak_force[row, slot]
+        higher = touched & (f_max > row_force)
+        log = log._replace(
+            peak_force=log.peak_force.at[row, slot].set(jnp.where(higher, f_max, row_force)),
+            peak_force_time=log.peak_force_time.at[row, slot].set(
+                jnp.where(higher, t_force, log.peak_force_time[row, slot])
+            ),
+            peak_penetration=log.peak_penetration.at[row, slot].set(
+                jnp.where(
+                    touched,
+                    jnp.maximum(log.peak_penetration[row, slot], d_max),
+                    log.peak_penetration[row, slot],
+                )
+            ),
+            impulse=log.impulse.at[row, slot].add(jnp.where(touched, impulse, 0.0)),
+            separation_time=log.separation_time.at[row, slot].set(
+                jnp.where(ended & open_, t0 + fraction * h, log.separation_time[row, slot])
+            ),
+        )
+    return log

@@ -1,0 +1,69 @@
+"""Contact episodes as an output (`Trajectory.contact_episodes`, `jaxdeploy.solvers.episodes`):
+the peak refinement on a function with a known maximum, and one Hertz impact against Johnson's
+closed forms (issue 31, Deliver 2)."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxdeploy import StepControl, get_scene
+from jaxdeploy.batch import run_scene
+from jaxdeploy.solvers import step_maximum
+
+
+def test_step_maximum_finds_an_interior_peak_and_differentiates_by_the_envelope_theorem():
+    def peak(height, centre):
+        def f(t):
+            return height * jnp.exp(-((t - centre) ** 2) / 0.01) + 0.1 * t
+
+        return step_maximum(f, 0.0, 1.0)[1]
+
+    # f' = 0 at t* with −2 h (t* − c)/w e^{…} + 0.1 = 0: solved by bisection here.
+    h, c, w = 2.0, 0.37, 0.01
+    lo, hi = c, c + 0.1
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        slope = -2 * h * (mid - c) / w * math.exp(-((mid - c) ** 2) / w) + 0.1
+        lo, hi = (mid, hi) if slope > 0 else (lo, mid)
+    t_star = 0.5 * (lo + hi)
+    exact = h * math.exp(-((t_star - c) ** 2) / w) + 0.1 * t_star
+    value = float(peak(h, c))
+    assert abs(value - exact) < 1e-13
+    # 8 samples alone would miss it by ~1e-2 (spacing 1/8 on a peak of width 0.1).
+    samples = step_maximum(lambda t: h * jnp.exp(-((t - c) ** 2) / w) + 0.1 * t, 0.0, 1.0)[2]
+    assert exact - float(jnp.max(samples)) > 1e-3
+    # Envelope theorem: d/dh = e^{−(t*−c)²/w}, d/dc = ∂f/∂c at t* = 2h(t*−c)/w e^{…} = 0.1.
+    d_height, d_centre = jax.grad(peak, argnums=(0, 1))(h, c)
+    np.testing.assert_allclose(float(d_height), math.exp(-((t_star - c) ** 2) / w), rtol=1e-10)
+    np.testing.assert_allclose(float(d_centre), 0.1, rtol=1e-8)
+
+
+def test_hertz_impact_episode_against_johnsons_closed_forms():
+    scene = get_scene("impact")  # undamped Hertz: Johnson's closed forms hold
+    params = scene.resolve_params({})
+    m, v0, k = params["mass"], params["impact_speed"], params["stiffness"]
+    control = StepControl("dopri8", rtol=1e-10, atol=1e-15, dt_max=1e-5)
+    trajectory = run_scene(scene, params, control=control, n_save=11)
+    assert trajectory.ok, trajectory.status()
+    (episodes,) = trajectory.contact_episodes()
+    assert len(episodes) == episodes.total == 1
+    (row,) = episodes.rows()
+    delta_max = (5 * m * v0**2 / (4 * k)) ** 0.4
+    f_max = k * delta_max**1.5
+    # Free flight across the clearance, then the onset at c/v0 with v⁻ = v0 (located).
+    np.testing.assert_allclose(row["onset_time"], params["clearance"] / v0, rtol=1e-10)
+    # v⁻ is δ̇ on the onset step's cubic Hermite of e (O(h⁴)): measured 5.8e-10 low.
+    np.testing.assert_allclose(row["impact_velocity"], v0, rtol=2e-9)
+    np.testing.assert_allclose(row["peak_penetration"], delta_max, rtol=1e-8)
+    np.testing.assert_allclose(row["peak_force"], f_max, rtol=1e-8)
+    # Duration 2.9433 δ_max/v0: Johnson's constant has five digits.
+    duration = row["separation_time"] - row["onset_time"]
+    np.testing.assert_allclose(duration, 2.9433 * delta_max / v0, rtol=2e-5)
+    # An elastic rebound reverses the momentum: ∫F dt = 2 m v0.
+    np.testing.assert_allclose(row["impulse"], 2 * m * v0, rtol=1e-7)
+    # The peak's time: half the contact (the undamped Hertz pulse is symmetric).
+    np.testing.assert_allclose(
+        row["peak_force_time"], row["onset_time"] + duration / 2, rtol=0, atol=1e-9
+    )
