@@ -35,7 +35,7 @@ from jaxdeploy import pages
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from jaxdeploy.analysis.deploy_array import lock_time  # noqa: E402
+from jaxdeploy.analysis.deploy_array import crossing_time  # noqa: E402
 from jaxdeploy.batch import run_scene, simulate_batch  # noqa: E402
 from jaxdeploy.io import atomic_write_json, run_metadata  # noqa: E402
 from jaxdeploy.scenes import DeployArray  # noqa: E402
@@ -94,7 +94,7 @@ def main(argv=None):
     n_steps = int(np.isfinite(times).sum())
     print(f"AD: {time.perf_counter() - start:.0f} s, {n_steps} steps, {traj.status()}")
     alpha = np.asarray(deployment_angle(traj.q))
-    lock = float(lock_time(np.asarray(traj.ts), alpha, GEOMETRY["latch"]["engage_alpha"]))
+    lock = float(crossing_time(np.asarray(traj.ts), alpha, GEOMETRY["latch"]["engage_alpha"]))
     lock = lock if np.isfinite(lock) else None
 
     cases = []

@@ -32,7 +32,7 @@ import time
 import numpy as np
 
 from jaxdeploy import pages
-from jaxdeploy.analysis.deploy_array import SPECTRUM_SEGMENT, lock_time
+from jaxdeploy.analysis.deploy_array import SPECTRUM_SEGMENT, crossing_time
 from jaxdeploy.analysis.spectra import (
     amplitude_spectrum,
     interval_mean_rate,
@@ -196,7 +196,7 @@ def measure():
         d = load(key)
         t = d["t"]
         # the summary's lock time: from the run's own saved α at the CLI's default grid
-        t_lock = lock_time(t[::20], d["alpha"][::20], GEOMETRY["latch"]["engage_alpha"])
+        t_lock = crossing_time(t[::20], d["alpha"][::20], GEOMETRY["latch"]["engage_alpha"])
         rec = {
             "label": label,
             "steps": int(d["steps"]),

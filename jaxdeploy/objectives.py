@@ -24,6 +24,8 @@ Features (all pure JAX in the channels; `ts` and the windows are concrete):
   (accelerations: interval means from the velocities) [Hz].
 * `deployment_deviation`: sqrt(mean_{t ≤ t_L} ‖e(t)‖²).
 * `peak_contact_force`: (mean_i F_i^p)^{1/p} over saved samples of a joint's normal force [N].
+* `lock_time`, `first_onset_time`: the run's own located event times [s] (`Scene.events`),
+  differentiable by the implicit-function theorem (panel1 for the root latch's lock).
 
 `Objective` composes them: J = Σ_i w_i ℓ_i with ℓ_i = ln f_i for the positive features and
 ℓ = `log_decay` (already a logarithm) for the decay, so every term is dimensionless and a weight
@@ -41,7 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .analysis.deploy_array import SPECTRUM_SEGMENT, lock_time
+from .analysis.deploy_array import SPECTRUM_SEGMENT, crossing_time
 from .analysis.spectra import interval_mean_rate, welch_psd
 
 SIGNALS = ("displacement", "velocity", "acceleration", "angle")
@@ -57,12 +59,22 @@ class Deployment:
     - `channels`: `Scene.channels` of the run (JAX arrays, may be traced).
     - `ideal`: channels of the ideal-joint run at the same times (or `None`: deviations are the
       channels themselves).
+    - `events`: `Scene.events` of the run (scalars, may be traced: located, differentiable
+      event times such as `lock_time`), or `None`.
     """
 
     ts: np.ndarray
     lock_time: float
     channels: Mapping
     ideal: Mapping | None = None
+    events: Mapping | None = None
+
+    def event(self, name: str):
+        """The run's event output `name` (`Scene.events`)."""
+        if self.events is None or name not in self.events:
+            valid = ", ".join(sorted(self.events or {})) or "none"
+            raise ValueError(f"the run has no event output {name!r}; valid: {valid}")
+        return self.events[name]
 
     def deviation(self, name: str):
         value = self.channels[name]
@@ -89,8 +101,9 @@ class Deployment:
 
 
 def ideal_lock_time(ts, alpha, lock_angle: float) -> float:
-    """First time α reaches `lock_angle`, linear between saved states (concrete)."""
-    return lock_time(np.asarray(ts), np.asarray(alpha), lock_angle)
+    """First time saved α reaches `lock_angle`, linear between saved states (concrete; on the
+    save grid: `DesignProblem` takes the ideal run's located `lock_time` event instead)."""
+    return crossing_time(np.asarray(ts), np.asarray(alpha), lock_angle)
 
 
 # --- windows (static index sets) ---------------------------------------------------------
@@ -241,6 +254,20 @@ def peak_contact_force(dep: Deployment, panel: str, *, power=8.0):
     return _power_mean(force + 1e-12, power)
 
 
+def lock_time(dep: Deployment, panel: str):
+    """The run's lock time [s]: when the root latch (panel 1's hinge) engaged, located inside
+    its step and differentiable (`Scene.events`; a design's own, not the ideal run's t_L)."""
+    if panel != "panel1":
+        raise ValueError(f"lock_time is panel1's (the root latch), not {panel!r}'s")
+    return dep.event("lock_time")
+
+
+def first_onset_time(dep: Deployment, panel: str):
+    """The first contact onset [s] of the clearance joint owned by `panel`, located inside its
+    step and differentiable (`Scene.events`)."""
+    return dep.event(f"{panel}_first_onset_time")
+
+
 FEATURES = {
     "log_decay": log_decay,
     "settling_time": settling_time,
@@ -248,6 +275,8 @@ FEATURES = {
     "dominant_frequency": dominant_frequency,
     "deployment_deviation": deployment_deviation,
     "peak_contact_force": peak_contact_force,
+    "lock_time": lock_time,
+    "first_onset_time": first_onset_time,
 }
 # ln is taken of these (positive) features in a composite objective; log_decay is already one.
 _ALREADY_LOG = {"log_decay"}

@@ -155,18 +155,20 @@ class DesignProblem:
             self.ideal_status = trajectory.status()
             if not trajectory.ok:
                 raise RuntimeError(f"ideal reference run {self.ideal_status}")
+            ideal_mechanism = ideal_scene.build(p)
             self.ideal = {
                 k: np.asarray(v)
-                for k, v in ideal_scene.channels(ideal_scene.build(p), trajectory).items()
+                for k, v in ideal_scene.channels(ideal_mechanism, trajectory).items()
             }
-        if lock_angle is None:
-            lock_angle = getattr(scene, "lock_angle", None)
+            ideal_events = ideal_scene.events(ideal_mechanism, trajectory)
         reference = self.ideal if self.ideal is not None else None
-        self.lock_time = (
-            ideal_lock_time(self.ts, reference["alpha"], lock_angle)
-            if reference is not None and "alpha" in reference and lock_angle is not None
-            else 0.0
-        )
+        if reference is not None and "lock_time" in ideal_events and lock_angle is None:
+            # The located engagement of the ideal run (independent of the save grid).
+            self.lock_time = float(ideal_events["lock_time"])
+        elif reference is not None and "alpha" in reference and lock_angle is not None:
+            self.lock_time = ideal_lock_time(self.ts, reference["alpha"], lock_angle)
+        else:
+            self.lock_time = 0.0
         if not math.isfinite(self.lock_time):
             raise ValueError(f"t_end = {self.t_end} s: the ideal mechanism does not lock by then")
 
@@ -187,8 +189,10 @@ class DesignProblem:
             trajectory = run_scene(
                 self.scene, params, self.t_end, ts=self.ts, control=self.control, **options
             )
-        channels = self.scene.channels(self.scene.build(params), trajectory)
-        return Deployment(self.ts, self.lock_time, channels, self.ideal), trajectory
+        mechanism = self.scene.build(params)
+        channels = self.scene.channels(mechanism, trajectory)
+        events = self.scene.events(mechanism, trajectory)
+        return Deployment(self.ts, self.lock_time, channels, self.ideal, events), trajectory
 
     def evaluate(self, x: Mapping):
         """`(J, parts, ok)`: the objective, each term's feature, and the run's success flag

@@ -33,6 +33,7 @@ def nothing_runs(monkeypatch):
     monkeypatch.setattr(jaxdeploy.sweep, "batch_function", forbidden)
     monkeypatch.setattr(jaxdeploy.optimize.DesignProblem, "__init__", forbidden)
     monkeypatch.setattr(jaxdeploy.fit, "fit", forbidden)
+    monkeypatch.setattr(jaxdeploy.fit, "gradient_check", forbidden)
     # Building an initial state assembles the mechanism (seconds); it comes after every check.
     from jaxdeploy.scenes import SCENES
 
@@ -55,6 +56,17 @@ def _bases(data):
         "sweep": ["sweep", "--scene", "pendulum", "--grid", "length=1,2", "--t-end", "0.1"],
         "optimize": ["optimize", "--param", "panel1_ra", "--steps", "1", "--quiet"],
         "fit": ["fit", data, "--scene", "pendulum", "--params", "length", "--quiet"],
+        "gradcheck": [
+            "gradcheck",
+            "pendulum",
+            "--output",
+            "x",
+            "--t-end",
+            "0.1",
+            "--quiet",
+            "--params",
+            "length",
+        ],
     }
 
 
@@ -92,6 +104,16 @@ NUMERIC = {
         "--dt-max": "pos",
         "--dt": "pos",
     },
+    "gradcheck": {
+        "--t-end": "pos",
+        "--n-save": ("int", 2),
+        "--tolerance": "unit",
+        "--steps": "unit",
+        "--rtol": "unit",
+        "--atol": "pos",
+        "--dt-max": "pos",
+        "--dt": "pos",
+    },
     "fit": {
         "--max-iterations": ("int", 1),
         "--starts": ("int", 0),
@@ -109,6 +131,7 @@ ASSIGNMENTS = {
     "sweep": [("--set", "mass"), ("--grid", "initial_angle")],
     "optimize": [("--set", "restitution"), ("--start", "panel1_ra")],
     "fit": [("--set", "mass")],
+    "gradcheck": [("--set", "mass")],
 }
 
 
@@ -153,7 +176,7 @@ def malformed(draw, command):
     choices = ["unknown flag", "numeric", "solver", "set unknown", "set malformed"]
     if ASSIGNMENTS[command]:
         choices.append("repeated")
-    if command in ("simulate", "sweep", "fit", "optimize"):
+    if command in ("simulate", "sweep", "fit", "optimize", "gradcheck"):
         choices.append("scene")
     defect = draw(st.sampled_from(choices))
     if defect == "unknown flag":
@@ -180,7 +203,7 @@ def malformed(draw, command):
 
 def _with_scene(base, command, extra):
     """`base` + `extra`; a bad --scene for simulate replaces its positional scene."""
-    if command == "simulate" and extra[:1] == ["--scene"]:
+    if command in ("simulate", "gradcheck") and extra[:1] == ["--scene"]:
         return [base[0], extra[1], *base[2:]]
     return [*base, *extra]
 

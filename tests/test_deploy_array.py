@@ -6,7 +6,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from jaxdeploy.analysis import analyse
-from jaxdeploy.analysis.deploy_array import SPECTRUM_SEGMENT, lock_time
+from jaxdeploy.analysis.deploy_array import SPECTRUM_SEGMENT, crossing_time, lock_time
 from jaxdeploy.analysis.spectra import interval_mean_rate, peak_frequency
 from jaxdeploy.scenes import DeployArray
 from jaxdeploy.scenes.deploy_array import GEOMETRY, deployment_angle
@@ -67,6 +67,9 @@ def test_ideal_lock_time_matches_one_dof_model(ideal_run):
         ts[i] - ts[i - 1]
     )
     np.testing.assert_allclose(t_lock, _one_dof_lock_time(), rtol=2e-3)
+    # The located engagement (memory, not the save grid) is the crossing of the saved α to
+    # within the saved points' linear-interpolation error (α̈ Δt²/8 / α̇, Δt = 0.5 ms: ~1e-7 s).
+    assert lock_time(mech, tr) == pytest.approx(t_lock, abs=1e-6)
 
 
 def test_latch_engages_at_90_degrees_and_holds(ideal_run):
@@ -98,7 +101,7 @@ def test_ideal_post_lock_spectral_peak_is_the_latch_mode(ideal_run):
     zeta = GEOMETRY["latch"]["c_latch"] / (2 * np.sqrt(stiffness * inertia))
     f_d = np.sqrt(stiffness / inertia) * np.sqrt(1 - zeta**2) / (2 * np.pi)
     ts = np.asarray(tr.ts)
-    t_lock = lock_time(ts, np.asarray(deployment_angle(tr.q)), np.pi / 2)
+    t_lock = crossing_time(ts, np.asarray(deployment_angle(tr.q)), np.pi / 2)
     starts, acc = interval_mean_rate(ts, np.asarray(tr.v)[:, 1])  # panel 1 centre, y
     after = starts >= t_lock
     f = peak_frequency(starts[after], acc[after], segment=SPECTRUM_SEGMENT)

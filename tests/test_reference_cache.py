@@ -28,11 +28,15 @@ def test_stored_reference_comes_back_bit_for_bit(tmp_path, monkeypatch):
     run = _Run()
     key = cache.key(scene, params, run.ts, scene.default_control)
     assert cache.load(key) is None
-    cache.store(key, run)
+    events = {"lock_time": 0.5397921, "panel1_first_onset_time": float("nan")}
+    cache.store(key, run, events)
     back = cache.load(key)
     for name in ("ts", "q", "v", "qdd", "lam"):
         np.testing.assert_array_equal(getattr(back, name), getattr(run, name))
     assert back.status() == "ok" and back.ok
+    # The scene's events (the located lock time) too, NaN kept NaN.
+    assert back.events["lock_time"] == events["lock_time"]
+    assert np.isnan(back.events["panel1_first_onset_time"])
 
 
 def test_key_follows_what_the_reference_depends_on(tmp_path, monkeypatch):
@@ -58,9 +62,9 @@ def test_failed_reference_is_not_stored_and_cache_off_stores_nothing(tmp_path, m
     scene = DeployArray()
     params = scene.resolve_params()
     key = cache.key(scene, params, _Run().ts, scene.default_control)
-    cache.store(key, _Run(ok=False))
+    cache.store(key, _Run(ok=False), {})
     assert cache.load(key) is None
     monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", "off")
     assert cache.folder() is None
-    cache.store(key, _Run())
+    cache.store(key, _Run(), {})
     assert cache.load(key) is None

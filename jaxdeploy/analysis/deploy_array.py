@@ -11,7 +11,8 @@ import os
 import numpy as np
 
 from ..io import atomic_savefig
-from ..scenes.deploy_array import GEOMETRY, deployment_angle
+from ..mechanism import lock_times
+from ..scenes.deploy_array import deployment_angle
 from .base import Analysis
 from .contact_forces import clearance_joint_history, contact_extremes
 from .spectra import interval_mean_rate, peak_frequency, welch_psd
@@ -45,14 +46,34 @@ def panel_points(mechanism, q):
     return out
 
 
-def lock_time(ts, alpha, lock_angle):
-    """First time α reaches the lock angle (linear interpolation between saved states)."""
-    above = np.flatnonzero(alpha >= lock_angle)
+def crossing_time(ts, signal, level) -> float:
+    """First time saved samples of `signal` reach `level`, by linear interpolation between
+    them: for signals known only at saved times (another model's run). It depends on the save
+    grid; a run's lock time is `lock_time`."""
+    above = np.flatnonzero(signal >= level)
     if len(above) == 0 or above[0] == 0:
         return float("nan")
     i = above[0]
-    frac = (lock_angle - alpha[i - 1]) / (alpha[i] - alpha[i - 1])
+    frac = (level - signal[i - 1]) / (signal[i] - signal[i - 1])
     return float(ts[i - 1] + frac * (ts[i] - ts[i - 1]))
+
+
+def lock_time(mechanism, trajectory) -> float:
+    """When the deployment angle reached the root latch's stop [s]: the engagement located
+    inside its step (`jaxdeploy.mechanism.lock_times`; independent of the save grid), NaN if
+    not by the run's end. A run read back from the reference cache carries it in its `events`.
+    (Before, the first crossing of the saved α by linear interpolation: 0.5397694 s at 2001
+    saved points and 0.5397652 s at 60001 over 0.6 s, with k = 1.50015 N m/rad.)"""
+    if getattr(trajectory, "memory", None) is None:
+        events = getattr(trajectory, "events", None)
+        if events is None or "lock_time" not in events:
+            raise ValueError(
+                "the run has no saved memory: simulate it with outputs='all' or 'state' for "
+                "its lock time"
+            )
+        return float(events["lock_time"])
+    root_latch = len(mechanism.elements) - 1  # DeployArray.build appends it last
+    return float(lock_times(mechanism, trajectory.memory)[root_latch])
 
 
 class DeployArrayAnalysis(Analysis):
@@ -82,9 +103,8 @@ def deploy_array_outputs(mechanism, trajectory, reference=None) -> dict:
     `ideal_status` and each panel's centre and tip `*_deviation` from it."""
     ts = np.asarray(trajectory.ts)
     q, qdd = np.asarray(trajectory.q), np.asarray(trajectory.qdd)
-    lock_angle = GEOMETRY["latch"]["engage_alpha"]
     alpha = deployment_angle(q)
-    out = {"t": ts, "alpha": alpha, "lock_time": lock_time(ts, alpha, lock_angle)}
+    out = {"t": ts, "alpha": alpha, "lock_time": lock_time(mechanism, trajectory)}
     if reference is not None:
         if not np.array_equal(np.asarray(reference.ts), ts):
             raise ValueError(
@@ -93,7 +113,7 @@ def deploy_array_outputs(mechanism, trajectory, reference=None) -> dict:
         q_ideal = np.asarray(reference.q)
         out["alpha_ideal"] = deployment_angle(q_ideal)
         out["ideal_status"] = reference.status()
-        out["lock_time_ideal"] = lock_time(ts, out["alpha_ideal"], lock_angle)
+        out["lock_time_ideal"] = lock_time(mechanism.idealized(), reference)
         points, points_ideal = panel_points(mechanism, q), panel_points(mechanism, q_ideal)
         for key in points:
             out[f"{key}_deviation"] = points[key] - points_ideal[key]

@@ -33,7 +33,9 @@ from .._program_cache import code_digest
 
 class StoredRun(NamedTuple):
     """A reference run read back from the cache: the saved times `ts` [s] and states `q`,
-    `v`, `qdd`, `lam` (as `Trajectory` has them) and its `status()`."""
+    `v`, `qdd`, `lam` (as `Trajectory` has them), its `status()` and its scene's scalar
+    `events` (`Scene.events`: e.g. the located lock time, which the saved states alone do not
+    give independently of the save grid)."""
 
     ts: np.ndarray
     q: np.ndarray
@@ -41,6 +43,7 @@ class StoredRun(NamedTuple):
     qdd: np.ndarray
     lam: np.ndarray
     status_text: str
+    events: dict
 
     @property
     def ok(self) -> bool:
@@ -98,9 +101,17 @@ def reference(scene, params, ts, compute):
     run, source = load(cache_key), "disk"
     if run is None:
         run, source = compute(), "computed"
-        store(cache_key, run)
+        store(cache_key, run, reference_events(scene, params, run))
     _in_memory[cache_key] = run
     return run, source
+
+
+def reference_events(scene, params, run) -> dict:
+    """`{name: float}`: the ideal counterpart's `Scene.events` of its reference `run`."""
+    ideal = scene.ideal_counterpart()
+    shared = {k: v for k, v in params.items() if k in ideal.params}
+    mechanism = ideal.build(ideal.resolve_params(shared))
+    return {k: float(v) for k, v in ideal.events(mechanism, run).items()}
 
 
 def load(cache_key: str) -> StoredRun | None:
@@ -111,14 +122,15 @@ def load(cache_key: str) -> StoredRun | None:
     try:
         with np.load(path) as data:
             arrays = [data[k] for k in ("ts", "q", "v", "qdd", "lam")]
-            return StoredRun(*arrays, str(data["status"]))
+            events = json.loads(str(data["events"]))
+            return StoredRun(*arrays, str(data["status"]), events)
     except (OSError, KeyError, ValueError):
         return None  # unreadable: compute it again
 
 
-def store(cache_key: str, run) -> None:
-    """Keep a successful reference run; a failed one is never stored (it is computed again
-    and its failure reported again)."""
+def store(cache_key: str, run, events: dict) -> None:
+    """Keep a successful reference run and its `events`; a failed one is never stored (it is
+    computed again and its failure reported again)."""
     from ..io import atomic_write_npz
 
     where = folder()
@@ -134,6 +146,8 @@ def store(cache_key: str, run) -> None:
             qdd=run.qdd,
             lam=run.lam,
             status=np.array(run.status()),
+            # NaN (an event not reached) as JSON's NaN token, read back by json.loads.
+            events=np.array(json.dumps(events)),
         )
     except OSError:
         pass

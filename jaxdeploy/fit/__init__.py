@@ -28,6 +28,7 @@ from ._fit import (
     refit_until_reproducible,
     tolerance_check,
 )
+from ._gradcheck import DEFAULT_STEPS, GradientCheck, gradient_check
 from ._parameters import FitParameter, check_not_ignored, make_parameters, parse_param_spec
 from ._plots import plot_fit
 from ._residuals import Comparison, ResidualSpec
@@ -47,6 +48,9 @@ __all__ = [
     "run_channels",
     "tolerance_check",
     "central_differences",
+    "DEFAULT_STEPS",
+    "GradientCheck",
+    "gradient_check",
     "FitParameter",
     "FitResult",
     "MeasurementError",

@@ -51,8 +51,10 @@ def output_function(
 ):
     """`(f, x0)`: `f({name: value}) = output(channels)` for the parameters `wrt` (the others
     fixed at `params`), a pure JAX function to `jit`, `grad`, `jacrev`/`jacfwd` or `vmap`;
-    `x0` the values of `wrt` in `params`. `output(channels)` maps the scene's channel dict
-    (`Scene.channels`, arrays over the saved times) to an array or scalar. With adaptive
+    `x0` the values of `wrt` in `params`. `output(outputs)` maps the scene's outputs
+    (`Scene.outputs`: its channels, arrays over the saved times, and its events, scalars such
+    as deploy_array's `lock_time` or slider_crank's `first_onset_time`, differentiable event
+    times) to an array or scalar. With adaptive
     steps the run replays its own accepted steps (`replay_steps=True`, see the module
     docstring); pass `replay_steps=False` to differentiate the raw adaptive loop. `adjoint`:
     a diffrax adjoint instead of the mode's default (e.g. `RecursiveCheckpointAdjoint` with
@@ -78,7 +80,7 @@ def output_function(
             scene, p, t_end, ts=ts, n_save=n_save, control=control, adjoint=adjoint,
             **simulate_options,
         )  # fmt: skip
-        return output(scene.channels(scene.build(p), traj))
+        return output(scene.outputs(scene.build(p), traj))
 
     return f, {name: float(base[name]) for name in wrt}
 
@@ -210,22 +212,16 @@ def central_differences(
     `parameter_jacobian`, with a truncation error O(h²) instead of the O(tol/h) noise of
     re-adapted steps. `replay=False` differences re-adapted runs (what a user perturbing
     the model sees)."""
-    import jax
     import numpy as np
 
-    from ..batch import run_scene, simulate_batch, step_control
+    from ..batch import simulate_batch, step_control
 
     base = scene.resolve_params(params)
     if replay and _adaptive(step_control(scene, control)):
-        reference = jax.jit(
-            lambda: run_scene(
-                scene, base, t_end, ts=ts, n_save=n_save, control=control,
-                replay_steps=True, **simulate_options,
-            )
-        )()  # fmt: skip
-        if not reference.ok:
-            raise RuntimeError(f"the unperturbed run failed: {reference.status()}")
-        simulate_options = {**simulate_options, "replay_steps": np.asarray(reference.step_times)}
+        times = replayed_step_times(
+            scene, base, t_end, ts=ts, n_save=n_save, control=control, **simulate_options
+        )
+        simulate_options = {**simulate_options, "replay_steps": times}
     widths = difference_steps(scene, base, wrt, rel_step, abs_step)
     stencils = {name: _stencil(scene, name, base[name], widths[name]) for name in wrt}
     cases = [
@@ -238,7 +234,7 @@ def central_differences(
         failed = [s for s in batch.statuses() if s != "ok"]
         raise RuntimeError(f"a perturbed run failed: {failed[0]}")
     values = [
-        np.asarray(output(scene.channels(batch.mechanism(i), batch.case(i))))
+        np.asarray(output(scene.outputs(batch.mechanism(i), batch.case(i))))
         for i in range(batch.size)
     ]
     out, i = {}, 0
@@ -248,6 +244,20 @@ def central_differences(
         out[name] = out[name] / widths[name]
         i += len(weights)
     return out
+
+
+def replayed_step_times(scene, params: Mapping, t_end: float, **options):
+    """The accepted step times of the unperturbed adaptive run (`simulate(...,
+    replay_steps=True)`): pass them as `replay_steps=` to runs that must step over them."""
+    import jax
+    import numpy as np
+
+    from ..batch import run_scene
+
+    reference = jax.jit(lambda: run_scene(scene, params, t_end, replay_steps=True, **options))()
+    if not reference.ok:
+        raise RuntimeError(f"the unperturbed run failed: {reference.status()}")
+    return np.asarray(reference.step_times)
 
 
 def difference_steps(scene, params: Mapping, wrt: Sequence[str], rel_step, abs_step=None) -> dict:

@@ -4,6 +4,7 @@ from .assembly import AssemblyError, ConsistentState, consistent_state
 from .bodies import GROUND, Body, Kinematics
 from .clearance import RevoluteClearance
 from .element import AbstractElement, Wrench
+from .events import first_onset_times, lock_times, onset_counts
 from .forces import (
     AppliedForce,
     AppliedTorque,
@@ -61,6 +62,9 @@ __all__ = [
     "energy_moved",
     "extremes_at",
     "contact_history",
+    "first_onset_times",
+    "lock_times",
+    "onset_counts",
     "merge_extremes",
     "metered",
     "step_log",

@@ -78,6 +78,13 @@ term that no cubic follows, and at an interior peak the force's dependence on ma
 a kink: the interpolated v⁻ errs by an amount the step length sets and no error estimate
 sees (measured on slider_crank: a tighter tolerance stopped improving the solution at ~1e-6 of
 c).
+**Onset times.** The memory also keeps an onset clock: `elapsed` (the sum of the accepted
+steps: time since the run's start), `onsets` (contacts begun so far), `onset_time` (the
+latest onset) and `first_onset_time` [s], each onset at `t₀ + s_on h` with s_on located on
+the step's interpolant. They are differentiable: s_on carries the implicit-function
+derivative of δ(s) = level (`_step_eccentricity`), `dt_on/dθ = −h (∂δ/∂θ)/(dδ/ds)`; the
+step grid is not differentiated.
+
 So the memory also records `event_fraction`, where in the step the onset, a v⁻-raising peak
 (rule `running_max` only) or the separation (where v⁻ resets) fell, and adaptive runs redo such
 a step to end just past the event (`jaxdeploy.solvers.LocateEvents`): v⁻ is then taken where
@@ -233,6 +240,28 @@ class RevoluteClearance(AbstractElement):
             "eccentricity": g.eccentricity,
             "eccentricity_rate": g.eccentricity_rate,
             "event_fraction": jnp.ones_like(g.penetration),
+            **self._init_onset_times(g),
+        }
+
+    def _init_onset_times(self, g: ClearanceGeometry):
+        """The onset clock (module docstring, "Onset times"): a run that starts in contact
+        counts that contact as its first, begun at time 0."""
+        zero = jnp.zeros_like(g.penetration)
+        began = jnp.where(g.penetration > self._onset(), 1.0, 0.0)
+        return {"elapsed": zero, "onsets": began, "onset_time": zero, "first_onset_time": zero}
+
+    @staticmethod
+    def _onset_times_after(memory, began, s_on, step):
+        """The onset clock after an accepted step of length `step`: a contact that `began` in
+        it did so at `elapsed + s_on·step` (s_on located with its implicit derivative)."""
+        step = jax.lax.stop_gradient(step)
+        at = memory["elapsed"] + s_on * step
+        first = began & (memory["onsets"] < 0.5)
+        return {
+            "elapsed": memory["elapsed"] + step,
+            "onsets": memory["onsets"] + jnp.where(began, 1.0, 0.0),
+            "onset_time": jnp.where(began, at, memory["onset_time"]),
+            "first_onset_time": jnp.where(first, at, memory["first_onset_time"]),
         }
 
     def memory_after_step(self, memory, kin: Kinematics, step):
@@ -274,18 +303,21 @@ class RevoluteClearance(AbstractElement):
 
                 def began():
                     s_on = path.crossing(onset)
-                    return path.rate(s_on), s_on
+                    return path.rate(s_on), s_on, s_on
 
                 def ended():
-                    return g.penetration_rate, path.separation(onset)
+                    return g.penetration_rate, path.separation(onset), jnp.ones_like(g.penetration)
 
                 return jax.lax.cond(now_in, began, ended)
 
             unchanged = (
                 jnp.where(now_in, memory["impact_velocity"], g.penetration_rate),
                 jnp.ones_like(g.penetration),
+                jnp.ones_like(g.penetration),
             )
-            v_minus, event = jax.lax.cond(now_in != was_in, onset_or_separation, lambda: unchanged)
+            v_minus, event, s_onset = jax.lax.cond(
+                now_in != was_in, onset_or_separation, lambda: unchanged
+            )
         else:
             path = step_path()
 
@@ -303,7 +335,7 @@ class RevoluteClearance(AbstractElement):
                 s_peak, has_peak = path.peak(s_on)
                 raised = has_peak & (path.rate(s_peak) > jnp.maximum(held, path.rate(s_on)))
                 event = jnp.minimum(jnp.where(was_in, 1.0, s_on), jnp.where(raised, s_peak, 1.0))
-                return running_max, event
+                return running_max, event, jnp.where(was_in, 1.0, s_on)
 
             def out_of_contact_at_end():
                 # A contact that ended inside this step: v⁻ resets there, and with it the force
@@ -314,10 +346,10 @@ class RevoluteClearance(AbstractElement):
                 event = jax.lax.cond(
                     was_in, lambda: path.separation(onset), lambda: jnp.ones_like(g.penetration)
                 )
-                return g.penetration_rate, event
+                return g.penetration_rate, event, jnp.ones_like(g.penetration)
 
             # The interpolant's root and peak searches (µs per step) only where they matter.
-            v_minus, event = jax.lax.cond(now_in, in_contact_at_end, out_of_contact_at_end)
+            v_minus, event, s_onset = jax.lax.cond(now_in, in_contact_at_end, out_of_contact_at_end)
         internal = {"internal": memory["internal"]} if self.has_internal_state else {}
         return internal | {
             "in_contact": jnp.where(now_in, 1.0, 0.0),
@@ -327,6 +359,7 @@ class RevoluteClearance(AbstractElement):
             "eccentricity": g.eccentricity,
             "eccentricity_rate": g.eccentricity_rate,
             "event_fraction": event,
+            **self._onset_times_after(memory, now_in & ~was_in, s_onset, step),
         }
 
     def event_fraction(self, memory):

@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 
 from .._validation import check_nonnegative, check_positive
@@ -17,6 +18,11 @@ from ._fields import param, static
 from .bodies import CLOCK, GROUND, Kinematics, rotate
 from .element import AbstractElement, Wrench
 from .joints import PointRef
+
+# The latch's crossing search: samples of the step that bracket the first crossing, then
+# safeguarded Newton iterations in the bracket (1/16 of the step wide), as for contact onsets.
+CROSSING_GRID = 16
+CROSSING_NEWTON = 10
 
 
 class Gravity(AbstractElement):
@@ -204,20 +210,36 @@ class AppliedForce(AbstractElement):
 
 class AbstractLatch(AbstractElement):
     """What every deployment latch shares: the hinge angle `α = θ_b − θ_a − angle_offset`,
-    engagement for good at the end of the step in which `direction·(α − α_L) ≥ 0` (memory
-    `engaged` ∈ {0, 1}), and from then on the lock torque `τ = −k_L (α − α_L) − c_L α̇` on
-    body_b (reaction on body_a). Subclasses (`Latch`, `PreloadedLatch`) declare the fields and
-    add what they apply besides. They also have `damping` c_L, `angle_offset` and `direction`
-    (fields with defaults, so declared by the subclasses alone: an abstract field here would
-    fix their place in the constructor before the subclasses' own fields without defaults)."""
+    engagement for good when `direction·(α − α_L)` first reaches 0 (memory `engaged` ∈ {0,
+    1}), and from then on the lock torque `τ = −k_L (α − α_L) − c_L α̇` on body_b (reaction on
+    body_a). Subclasses (`Latch`, `PreloadedLatch`) declare the fields and add what they apply
+    besides. They also have `damping` c_L, `angle_offset` and `direction` (fields with
+    defaults, so declared by the subclasses alone: an abstract field here would fix their place
+    in the constructor before the subclasses' own fields without defaults).
+
+    **The engagement is an event located inside the step** (the literature's model: the latch
+    engages when the angle reaches the stop; Li, Wang & Huang, *Mech. Syst. Signal Process.*
+    117 (2019) 188), as a clearance joint's contact onset is (`jaxdeploy.solvers.LocateEvents`,
+    `mechanism/_step_eccentricity.py`):
+
+    * the latch acts wherever it is engaged *or* its angle has reached the stop, so inside the
+      step in which α crosses α_L the torque starts at the crossing, as a function of the state
+      (its stiffness part is continuous there, its damping part jumps by c_L α̇);
+    * after each accepted step the crossing is located on the cubic Hermite interpolant of
+      α(s) through the step's end values (α, α̇), s = (t − t₀)/h ∈ [0, 1], by a bracketing
+      search and safeguarded Newton iterations; `event_fraction` reports it, and an adaptive
+      run ends the step just past it;
+    * the lock time `t* = t₀ + s* h` (memory `lock_time`, time since the run's start, `elapsed`
+      the sum of the accepted steps) is differentiable: one Newton step from the
+      gradient-stopped root carries the implicit-function derivative
+      `ds*/dθ = −(∂g/∂θ)/(dg/ds)`, `g(s) = direction·(α(s) − α_L)`.
+    """
 
     body_a: eqx.AbstractVar[str]
     body_b: eqx.AbstractVar[str]
     lock_angle: eqx.AbstractVar[float]
     stiffness: eqx.AbstractVar[float]
     has_memory: ClassVar[bool] = True
-    # Engagement happens at a step boundary, at an overshoot bounded by that step's rotation.
-    switch_flags: ClassVar[tuple[str, ...]] = ("engaged",)
 
     def _angle(self, kin: Kinematics):
         return relative_angle(kin, self.body_a, self.body_b, self.angle_offset)
@@ -230,14 +252,82 @@ class AbstractLatch(AbstractElement):
         """`engaged` of a state from which no step has been taken yet."""
         return jnp.where(self._reached(kin), 1.0, 0.0)
 
-    def _engaged_after(self, memory, kin: Kinematics):
-        """`engaged` after an accepted step ending at `kin`: once engaged, for good."""
+    def _active(self, kin: Kinematics, memory):
+        """1 where the latch acts: engaged, or past the stop inside the step that engages it."""
         return jnp.maximum(memory["engaged"], self._engaged_at(kin))
 
-    def _lock_wrenches(self, kin: Kinematics, engaged) -> list:
+    def _init_event_memory(self, kin: Kinematics):
+        alpha, rate = self._angle(kin)
+        zero = jnp.zeros_like(alpha)
+        return {
+            "engaged": self._engaged_at(kin),
+            "angle": alpha,
+            "angle_rate": rate,
+            "elapsed": zero,
+            "lock_time": zero,
+            "event_fraction": jnp.ones_like(alpha),
+        }
+
+    def _event_memory_after(self, memory, kin: Kinematics, step):
+        """The memory after an accepted step of length `step` ending at `kin`: engaged for
+        good once the stop is reached, and in the step that engages, the located crossing."""
+        alpha, rate = self._angle(kin)
+        engaged = jnp.maximum(memory["engaged"], self._engaged_at(kin))
+        newly = (engaged > 0.5) & (memory["engaged"] < 0.5)
+        step = jax.lax.stop_gradient(step)
+        path = (memory["angle"], memory["angle_rate"], alpha, rate, step)
+        s = jax.lax.cond(newly, lambda: self._crossing(*path), lambda: jnp.ones_like(alpha))
+        return {
+            "engaged": engaged,
+            "angle": alpha,
+            "angle_rate": rate,
+            "elapsed": memory["elapsed"] + step,
+            "lock_time": jnp.where(newly, memory["elapsed"] + s * step, memory["lock_time"]),
+            "event_fraction": s,
+        }
+
+    def _crossing(self, alpha0, rate0, alpha1, rate1, step):
+        """The first s ∈ [0, 1] where `g(s) = direction·(α(s) − α_L)` rises through 0 on the
+        cubic Hermite interpolant (g(0) < 0 ≤ g(1)), with its implicit derivative (class
+        docstring)."""
+
+        def g_and_slope(s, a0, r0, a1, r1, lock):
+            h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
+            h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
+            d00, d10 = 6 * s**2 - 6 * s, 3 * s**2 - 4 * s + 1
+            d01, d11 = -6 * s**2 + 6 * s, 3 * s**2 - 2 * s
+            value = h00 * a0 + h10 * step * r0 + h01 * a1 + h11 * step * r1
+            slope = d00 * a0 + d10 * step * r0 + d01 * a1 + d11 * step * r1
+            return self.direction * (value - lock), self.direction * slope
+
+        ends = (alpha0, rate0, alpha1, rate1, self.lock_angle)
+        frozen = [jax.lax.stop_gradient(x) for x in ends]
+        samples = jnp.linspace(0.0, 1.0, CROSSING_GRID + 1)
+        above = g_and_slope(samples, *frozen)[0] >= 0
+        k = jnp.argmax(above[1:])  # the first sample interval whose right end is past the stop
+
+        def newton_or_bisect(_, bracket):
+            lo, hi, x = bracket
+            f, slope = g_and_slope(x, *frozen)
+            lo, hi = jnp.where(f < 0, x, lo), jnp.where(f < 0, hi, x)
+            newton = x - f / jnp.where(slope > 0, slope, jnp.inf)
+            ok = (slope > 0) & (newton > lo) & (newton < hi)
+            return lo, hi, jnp.where(ok, newton, 0.5 * (lo + hi))
+
+        lo, hi = samples[k], samples[k + 1]
+        _, _, x = jax.lax.fori_loop(0, CROSSING_NEWTON, newton_or_bisect, (lo, hi, 0.5 * (lo + hi)))
+        # One Newton step from the converged root: the implicit derivative ds*/dθ.
+        f, slope = g_and_slope(x, *ends)
+        return jnp.clip(x - f / jnp.where(slope > 0, slope, jnp.inf), 0.0, 1.0)
+
+    def event_fraction(self, memory):
+        """Where in the last accepted step the latch engaged (≥ 1: it did not)."""
+        return memory["event_fraction"]
+
+    def _lock_wrenches(self, kin: Kinematics, active) -> list:
         alpha, rate = self._angle(kin)
         torque = -self.stiffness * (alpha - self.lock_angle) - self.damping * rate
-        return _torque_pair(self.body_a, self.body_b, engaged * torque)
+        return _torque_pair(self.body_a, self.body_b, active * torque)
 
     def bodies(self):
         return (self.body_a, self.body_b)
@@ -250,9 +340,9 @@ class Latch(AbstractLatch):
 
     `τ = −k_L (α − α_L) − c_L α̇` on body_b when engaged, 0 before; `α = θ_b − θ_a − angle_offset`.
 
-    Memory: `engaged` ∈ {0, 1}, updated after each accepted step (the step in which α first
-    reaches α_L still runs unlatched; the next one latches at the overshoot, which is bounded by
-    that step's rotation). `direction = +1` latches when α rises through α_L, `−1` when falling.
+    Memory: `engaged` ∈ {0, 1} and the located engagement (`AbstractLatch`: the torque acts
+    from the crossing inside the step; `lock_time` [s since the run's start] is its
+    differentiable time). `direction = +1` latches when α rises through α_L, `−1` when falling.
     """
 
     body_a: str = static()
@@ -268,19 +358,19 @@ class Latch(AbstractLatch):
         check_nonnegative("Latch.damping", self.damping, "N m s/rad")
 
     def init_memory(self, kin: Kinematics):
-        return {"engaged": self._engaged_at(kin)}
+        return self._init_event_memory(kin)
 
     def memory_after_step(self, memory, kin: Kinematics, step):
-        return {"engaged": self._engaged_after(memory, kin)}
+        return self._event_memory_after(memory, kin, step)
 
     def wrenches(self, kin: Kinematics, t, memory):
-        return self._lock_wrenches(kin, memory["engaged"])
+        return self._lock_wrenches(kin, self._active(kin, memory))
 
     def potential_energy(self, kin: Kinematics, memory):
-        """`V = ½ k_L (α − α_L)²` once engaged, 0 before. Engaging at an overshoot `α − α_L`
-        puts `½ k_L (α − α_L)²` into the latch at once: energy the discrete engagement adds."""
+        """`V = ½ k_L (α − α_L)²` where the latch acts, 0 before: continuous at the stop, so
+        the located engagement stores no energy."""
         alpha, _ = self._angle(kin)
-        return memory["engaged"] * 0.5 * self.stiffness * (alpha - self.lock_angle) ** 2
+        return self._active(kin, memory) * 0.5 * self.stiffness * (alpha - self.lock_angle) ** 2
 
 
 class PreloadedLatch(AbstractLatch):
@@ -290,8 +380,8 @@ class PreloadedLatch(AbstractLatch):
     free play, a design principle of deployable mechanisms: Lake & Hachkowski, AIAA 2000-1409,
     "Mechanism design principles for optical-precision, deployable instruments", recalled).
 
-    Once engaged (as `Latch`: for good, at the end of the step in which
-    `direction·(α − α_L) ≥ 0`, `α = θ_b − θ_a − angle_offset`) it applies
+    Once engaged (as `Latch`: for good, from the located instant at which
+    `direction·(α − α_L)` reaches 0, `α = θ_b − θ_a − angle_offset`) it applies
 
     * the lock torque of the notch/stop `τ = −k_L (α − α_L) − c_L α̇` on body_b, the reaction
       on body_a (the latch model of Li, Wang & Huang, *Mech. Syst. Signal Process.* 117 (2019)
@@ -306,8 +396,8 @@ class PreloadedLatch(AbstractLatch):
     The roller spring is modelled as a constant force: its rate times the travel left to it
     once the hinge is seated (at most the hinge clearance, tens of µm) is far below F_p.
 
-    Memory: `engaged` ∈ {0, 1} and `anchor`, P's position at engagement in the roller body's
-    frame (the reference of the preload's potential, so that engaging stores no energy).
+    Memory: the located engagement (`AbstractLatch`) and `anchor`, P's position at the end of
+    the engaging step in the roller body's frame (the reference of the preload's potential).
 
     **Arguments:** `body_a`, `body_b`: the hinge's bodies; `lock_angle` α_L [rad];
     `stiffness` k_L [N m/rad] ≥ 0 (0: the preload alone, for a hinge whose angle another
@@ -357,21 +447,19 @@ class PreloadedLatch(AbstractLatch):
         return self.preload * rotate(kin.angle(self.roller_body), u)
 
     def init_memory(self, kin: Kinematics):
-        return {
-            "engaged": self._engaged_at(kin),
-            "anchor": self._in_roller_frame(kin, self._point(kin)),
-        }
+        anchor = self._in_roller_frame(kin, self._point(kin))
+        return self._init_event_memory(kin) | {"anchor": anchor}
 
     def memory_after_step(self, memory, kin: Kinematics, step):
-        engaged = self._engaged_after(memory, kin)
-        newly = (engaged > 0.5) & (memory["engaged"] < 0.5)
+        out = self._event_memory_after(memory, kin, step)
+        newly = (out["engaged"] > 0.5) & (memory["engaged"] < 0.5)
         here = self._in_roller_frame(kin, self._point(kin))
-        return {"engaged": engaged, "anchor": jnp.where(newly, here, memory["anchor"])}
+        return out | {"anchor": jnp.where(newly, here, memory["anchor"])}
 
     def wrenches(self, kin: Kinematics, t, memory):
-        engaged = memory["engaged"]
-        out = self._lock_wrenches(kin, engaged)
-        f = engaged * self._force(kin)
+        active = self._active(kin, memory)
+        out = self._lock_wrenches(kin, active)
+        f = active * self._force(kin)
         p = self._point(kin)
         out.append(Wrench(self.preload_body, force=f, point=p))
         if self.roller_body != GROUND:
@@ -387,7 +475,8 @@ class PreloadedLatch(AbstractLatch):
         theta = kin.angle(self.roller_body)
         anchor = kin.origin(self.roller_body) + rotate(theta, memory["anchor"])
         work = jnp.dot(self._force(kin), self._point(kin) - anchor)
-        return memory["engaged"] * (0.5 * self.stiffness * (alpha - self.lock_angle) ** 2 - work)
+        elastic = 0.5 * self.stiffness * (alpha - self.lock_angle) ** 2
+        return self._active(kin, memory) * (elastic - work)
 
 
 class HingeFriction(AbstractElement):

@@ -127,6 +127,18 @@ class Scene(abc.ABC):
                 out[f"{body.name}_a{coordinate}"] = trajectory.qdd[:, 3 * k + j]
         return out
 
+    def events(self, mechanism: Mechanism, trajectory) -> dict:
+        """Named event outputs of one trajectory, each a scalar: located event times [s since
+        the run's start] and counts (`jaxdeploy.mechanism.events`). Pure JAX, differentiable
+        (event times by the implicit-function theorem) and independent of the save grid; none
+        by default, scenes add theirs (e.g. `deploy_array`'s `lock_time`)."""
+        return {}
+
+    def outputs(self, mechanism: Mechanism, trajectory) -> dict:
+        """What a loss or objective reads by name: the `channels` (arrays over the saved
+        times) and the `events` (scalars)."""
+        return {**self.channels(mechanism, trajectory), **self.events(mechanism, trajectory)}
+
     def select_channels(self, mechanism: Mechanism, trajectory, names) -> dict:
         """`{name: channel}` for the requested `names`; an unknown name raises `ValueError`
         listing the scene's channels."""

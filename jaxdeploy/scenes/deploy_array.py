@@ -35,6 +35,9 @@ from ..mechanism import (
     RevoluteClearance,
     consistent_state,
     contact_history,
+    first_onset_times,
+    lock_times,
+    onset_counts,
 )
 from ..solvers.step_control import StepControl
 from ._contact import (
@@ -496,6 +499,23 @@ class DeployArray(Scene):
             owner = self.clearance_joints[joint_names[index]]
             out[f"{owner}_normal_force"] = history["normal_force"]
             out[f"{owner}_penetration"] = history["penetration"]
+        return out
+
+    def events(self, mechanism, trajectory):
+        """`lock_time` [s]: when the deployment angle reached the root latch's stop (NaN if
+        not by the run's end), located inside its step and differentiable
+        (`jaxdeploy.mechanism.lock_times`); per clearance joint (named by owner)
+        `{owner}_first_onset_time` [s] (NaN: none) and `{owner}_impacts` (contacts begun, a
+        count)."""
+        root_latch = len(mechanism.elements) - 1  # build() appends it last
+        out = {"lock_time": lock_times(mechanism, trajectory.memory)[root_latch]}
+        joint_names = list(JOINTS)
+        onsets = first_onset_times(mechanism, trajectory.memory)
+        counts = onset_counts(mechanism, trajectory.memory)
+        for index, t_on in onsets.items():
+            owner = self.clearance_joints[joint_names[index]]
+            out[f"{owner}_first_onset_time"] = t_on
+            out[f"{owner}_impacts"] = counts[index]
         return out
 
     # The deployment angle α [rad] at which the root latch engages (`alpha` channel).

@@ -31,6 +31,8 @@ from ..mechanism import (
     Revolute,
     RevoluteClearance,
     consistent_state,
+    first_onset_times,
+    onset_counts,
 )
 from ..solvers.step_control import StepControl
 from ._contact import (
@@ -211,6 +213,20 @@ class SliderCrank(Scene):
         if not is_exactly_zero(p["gravity"]):
             elements.append(Gravity(jnp.stack([zero, -p["gravity"]])))
         return Mechanism([crank, rod, slider], elements, ground_points={"O": (0.0, 0.0)})
+
+    def events(self, mechanism, trajectory):
+        """`first_onset_time` [s]: the onset of the rod–slider joint's first contact (NaN if
+        none by the run's end), located inside its step and differentiable
+        (`jaxdeploy.mechanism.first_onset_times`), and `impacts`: contacts begun (a count);
+        none for the ideal mechanism."""
+        onsets = first_onset_times(mechanism, trajectory.memory)
+        if not onsets:
+            return {}
+        (index, t_on), counts = (
+            next(iter(onsets.items())),
+            onset_counts(mechanism, trajectory.memory),
+        )
+        return {"first_onset_time": t_on, "impacts": counts[index]}
 
     def initial_state(self, params, mechanism):
         """Crank angle 0; the ideal mechanism's pose and velocities (journal centred)."""

@@ -1,0 +1,75 @@
+"""`fit.gradient_check` and `jaxdeploy gradcheck`: the verdict's logic on made-up differences
+(cheap), and one real check through the command line on slider_crank's first onset (slow)."""
+
+import json
+import math
+
+import pytest
+
+from jaxdeploy.fit._gradcheck import GradientCheck, ParameterCheck, _converged
+
+
+def _check(ad, replay, switched=()):
+    p = ParameterCheck(value=1.0, ad=ad, ad_reverse=None, tolerance=1e-2)
+    p.fd = {"replay": dict(replay)}
+    p.switched = {"replay": list(switched)}
+    p.converged, p.spread, p.converged_kind = _converged(p)
+    return p
+
+
+def test_the_converged_difference_is_the_best_agreeing_unflagged_pair():
+    # Truncation error at 1e-2, round-off at 1e-7, a flagged (impact count changed) 1e-3.
+    replay = {
+        "1e-02": 1.2,
+        "1e-03": 7.0,
+        "1e-04": 1.0001,
+        "1e-05": 1.0,
+        "1e-06": 0.9990,
+        "1e-07": 0.8,
+    }
+    p = _check(1.0005, replay, switched=["1e-03"])
+    assert p.converged == pytest.approx(1.00005)
+    assert p.spread == pytest.approx(1e-4, rel=1e-3)
+    assert p.agree
+    assert p.agreeing_steps("replay") == ["1e-04", "1e-05", "1e-06"]
+    # AD 3 % off the converged difference: disagree, whatever one step says.
+    assert not _check(1.03, replay, switched=["1e-03"]).agree
+    # Every pair flagged or scattered: no converged difference, never "agree".
+    scattered = _check(1.0, {"1e-02": 1.0, "1e-03": 2.0, "1e-04": 3.0})
+    assert not scattered.agree and math.isfinite(scattered.converged)
+    flagged = _check(1.0, {"1e-02": 1.0, "1e-03": 1.0}, switched=["1e-02", "1e-03"])
+    assert not flagged.agree and math.isnan(flagged.converged)
+
+
+def test_the_json_record_says_what_the_issue_asks_and_is_strict():
+    from jaxdeploy.io import strict_json
+
+    p = _check(1.0, {"1e-03": 1.0, "1e-04": 1.0})
+    check = GradientCheck("s", "lock_time", 0.5, {"k": p}, (1e-3, 1e-4), 1e-2)
+    record = json.loads(strict_json(check.to_json()))
+    assert record["verdict"] == "agree"
+    assert set(record["params"]["k"]) >= {"ad", "fd", "agree"}
+    assert record["params"]["k"]["fd"] == {"1e-03": 1.0, "1e-04": 1.0}
+
+
+@pytest.mark.slow  # ~2 min CPU: forward mode and 2 x 2 difference batches of slider_crank
+def test_gradcheck_command_on_the_first_onset(tmp_path, capsys):
+    from jaxdeploy.cli import main
+
+    out = tmp_path / "check"
+    code = main([
+        "gradcheck", "slider_crank", "--output", "first_onset_time", "--params", "clearance",
+        "--t-end", "2.5e-4", "--steps", "1e-3", "1e-4", "--modes", "forward", "--quiet",
+        "--out", str(out),
+    ])  # fmt: skip
+    printed = capsys.readouterr().out
+    assert code == 0, printed
+    record = json.loads((out / "gradcheck.json").read_text())
+    clearance = record["params"]["clearance"]
+    assert record["verdict"] == "agree" and clearance["agree"]
+    assert set(clearance["fd"]) == {"1e-03", "1e-04"} and set(clearance["fd_rerun"]) == {
+        "1e-03",
+        "1e-04",
+    }
+    assert (out / "gradcheck.png").stat().st_size > 0
+    assert "clearance: AD" in printed and "verdict: agree" in printed
