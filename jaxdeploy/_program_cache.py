@@ -27,7 +27,10 @@ progress bar; it warns once).
 Every call through the store runs the exported program, the first (which writes the entry)
 as well as the later ones (which read it), so a result does not depend on whether the entry
 existed; the program is the one `jax.jit(fn)` lowers, and tests/test_program_cache.py checks
-that the results are bit-identical to `fn(*args)`.
+that the results are bit-identical to `fn(*args)`. Its compiled form is kept beside the entry
+too (`<key>-<machine>.executable`, `jax.experimental.serialize_executable`), so that a later
+process neither lowers the exported program again nor looks it up in JAX's compilation cache:
+it loads the executable and runs it (`_executable`).
 
 Location: off unless a caller enables it (`enable`; the command line does, beside the
 compilation cache: `_compilation_cache.cache_dir()` + `-programs`, so `JAXDEPLOY_CACHE_DIR`
@@ -50,12 +53,17 @@ import platform
 import sys
 import tempfile
 import threading
+import time
 import warnings
 from contextlib import contextmanager
+
+# The `jax.monitoring` time span of reading a compiled program back (`_executable`).
+LOAD_EVENT = "/jaxdeploy/program_cache/load_executable_duration"
 
 _folder: str | None = None
 _unexportable: set[str] = set()
 _loaded: dict[str, tuple] = {}
+_compiled: dict[str, object] = {}
 _hook = threading.local()
 
 # JAX settings that change what a function traces to (dtypes, precision, promotion rules).
@@ -228,8 +236,93 @@ def call(fn, *args):
     _traced()
     exported, skeleton = entry
     arrays = [x for x in jax.tree.leaves(args) if eqx.is_array(x)]
-    results = iter(exported.call(*arrays))
+    results = iter(_executable(cache_key, path, exported, arrays)(*arrays))
     return jax.tree.map(lambda leaf: next(results) if leaf is _ARRAY else leaf, skeleton)
+
+
+def _executable(cache_key, path, exported, arrays):
+    """The compiled form of `exported` for `arrays`: this process's, else the one kept beside
+    the entry (`_executable_path`), else compiled now and kept there.
+
+    Calling `exported` itself would lower it in every process (`jax.export`'s call parses the
+    stored module into a new one) and look the result up in JAX's compilation cache by a hash
+    of that module: on a warm `jaxdeploy simulate` those two steps were most of loading its
+    programs. The executable is what `jax.jit(exported.call)` compiles, serialized with
+    `jax.experimental.serialize_executable`, so its results are those of the exported program
+    (tests/test_program_cache.py). It is kept per machine (`_machine`): compiled code is
+    specific to the processor and XLA's flags."""
+    import jax
+
+    compiled = _compiled.get(cache_key)
+    if compiled is not None:
+        return compiled
+    if b"lapack_" in bytes(exported.mlir_module_serialized):
+        # What `jax.export` does before lowering such a program and JAX's lowering of a
+        # LAPACK call: load the LAPACK kernels (scipy's), which a program read back calls.
+        import numpy as np
+        from jaxlib import lapack
+
+        lapack.prepare_lapack_call("getrf_ffi", np.float64)
+    where = _executable_path(path)
+    began = time.time()
+    compiled = _load_executable(where)
+    if compiled is None:
+        compiled = jax.jit(exported.call).lower(*arrays).compile()
+        _store_executable(where, compiled)
+    else:  # reported like JAX's compile events (a command's phases count it as compiling)
+        jax.monitoring.record_event_time_span(LOAD_EVENT, began, time.time())
+    _compiled[cache_key] = compiled
+    return compiled
+
+
+@functools.cache
+def _machine() -> str:
+    """What compiled code depends on besides the entry's key: the processor (its model and
+    instruction-set flags) and XLA's flags."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            described = [line for line in f if line.startswith(("model name", "flags"))][:2]
+    except OSError:
+        described = [platform.processor()]
+    record = [described, os.environ.get("XLA_FLAGS", "")]
+    return hashlib.sha256(json.dumps(record).encode()).hexdigest()[:16]
+
+
+def _executable_path(path: str) -> str:
+    return f"{path.removesuffix('.jaxexport')}-{_machine()}.executable"
+
+
+def _load_executable(path):
+    """The executable kept at `path`, or None when there is none or it cannot be loaded."""
+    from jax.experimental.serialize_executable import deserialize_and_load
+
+    try:
+        with open(path, "rb") as f:
+            payload = f.read()
+    except OSError:
+        return None
+    try:
+        stored = pickle.loads(payload)
+        return deserialize_and_load(stored["executable"], stored["in_tree"], stored["out_tree"])
+    except Exception as err:  # noqa: BLE001 - any unreadable executable is compiled again
+        warnings.warn(
+            f"ignoring the unreadable compiled program {path} ({type(err).__name__}: {err}); "
+            "compiling it again",
+            RuntimeWarning,
+            stacklevel=4,
+        )
+        return None
+
+
+def _store_executable(path, compiled) -> None:
+    from jax.experimental.serialize_executable import serialize
+
+    try:
+        executable, in_tree, out_tree = serialize(compiled)
+    except Exception:  # noqa: BLE001 - not serializable here: compiled again next time
+        return
+    payload = pickle.dumps({"executable": executable, "in_tree": in_tree, "out_tree": out_tree})
+    _store(path, payload)
 
 
 class _ArrayMark:

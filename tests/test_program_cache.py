@@ -29,6 +29,7 @@ def store(tmp_path, monkeypatch):
     monkeypatch.setattr(_program_cache, "equinox_on_error", lambda: "nan")
     monkeypatch.setattr(_program_cache, "_unexportable", set())
     monkeypatch.setattr(_program_cache, "_loaded", {})
+    monkeypatch.setattr(_program_cache, "_compiled", {})
     _program_cache.enable(str(tmp_path / "programs"))
     yield tmp_path / "programs"
     _program_cache.enable(None)
@@ -43,6 +44,7 @@ def test_a_hit_reads_the_stored_program_and_gives_the_functions_result(store):
     first = _program_cache.call(_toy, x, 1.5, 3)
     assert len(_entries(store)) == 1
     _program_cache._loaded.clear()  # as in a new process: read from the disk
+    _program_cache._compiled.clear()
     again = _program_cache.call(_toy, x + 1.0, 1.5, 3)  # new values, same program
     assert len(_entries(store)) == 1
     direct = _toy(x + 1.0, 1.5, 3)
@@ -128,6 +130,7 @@ def test_a_corrupt_entry_is_ignored_with_a_warning_and_replaced(store):
     (name,) = _entries(store)
     (store / name).write_bytes(b"not a program")
     _program_cache._loaded.clear()  # as in a new process
+    _program_cache._compiled.clear()
     with pytest.warns(RuntimeWarning, match="unreadable program cache entry"):
         out = _program_cache.call(_toy, x, 1.5, 3)
     np.testing.assert_array_equal(np.asarray(out["y"]), np.asarray(_toy(x, 1.5, 3)["y"]))

@@ -15,11 +15,15 @@ import threading
 import time
 from contextlib import contextmanager
 
-# JAX's events for the three stages of compiling one program (jax/_src/dispatch.py).
+from .._program_cache import LOAD_EVENT
+
+# JAX's events for the three stages of compiling one program (jax/_src/dispatch.py), and the
+# program cache's for reading a compiled program back instead (jaxdeploy/_program_cache.py).
 COMPILE_EVENTS = (
     "/jax/core/compile/jaxpr_trace_duration",
     "/jax/core/compile/jaxpr_to_mlir_module_duration",
     "/jax/core/compile/backend_compile_duration",
+    LOAD_EVENT,
 )
 _spans: list[tuple[float, float, int]] = []  # (start, end, thread id)
 _listening = False
