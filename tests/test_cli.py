@@ -90,7 +90,8 @@ def test_compiled_simulation_is_kept_in_the_persistent_cache(tmp_path):
     """A fresh `jaxdeploy simulate` stores the compiled solve (no host callbacks in it), so
     the next run with the same composition loads it instead of compiling, and the traced
     programs beside it (jaxdeploy/_program_cache.py), so that it does not trace them either:
-    the solve runs as a program read back through `jax.export` (`call_exported`)."""
+    the solve runs as a program read back through `jax.export`, compiled, its executable kept
+    beside it too."""
     import os
     import subprocess
     import sys
@@ -106,9 +107,11 @@ def test_compiled_simulation_is_kept_in_the_persistent_cache(tmp_path):
         [*cmd, "--out", str(tmp_path / "run"), "--quiet"], env=env, capture_output=True, text=True
     )
     assert proc.returncode == 0, proc.stderr
-    assert any(p.name.startswith("jit_call_exported-") for p in cache.iterdir())
-    # the initial state's assembly and the solve
+    # the exported solve compiled (`jax.jit(exported.call)`), in JAX's cache...
+    assert any(p.name.startswith("jit_call-") for p in cache.iterdir())
+    # ...and the initial state's assembly and the solve, traced and compiled, beside it
     assert len(list((tmp_path / "xla-programs").glob("*.jaxexport"))) >= 2
+    assert len(list((tmp_path / "xla-programs").glob("*.executable"))) >= 2
 
 
 def test_save_times_are_checked_before_the_solve():
