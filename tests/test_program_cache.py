@@ -137,6 +137,25 @@ def test_a_corrupt_entry_is_ignored_with_a_warning_and_replaced(store):
     assert _program_cache._load(str(store / name)) is not None  # written again
 
 
+def test_the_compiled_program_is_kept_and_a_damaged_one_compiled_again(store):
+    """Each entry's executable is kept beside it and run by a later process; a damaged one is
+    ignored with a warning, compiled again and replaced, with the same results."""
+    x = jnp.linspace(0.0, 1.0, 5)
+    expected = np.asarray(_toy(x, 1.5, 3)["y"])
+    _program_cache.call(_toy, x, 1.5, 3)
+    (executable,) = store.glob("*.executable")
+    _program_cache._loaded.clear()  # as in a new process: the executable read back
+    _program_cache._compiled.clear()
+    np.testing.assert_array_equal(np.asarray(_program_cache.call(_toy, x, 1.5, 3)["y"]), expected)
+    executable.write_bytes(b"not an executable")
+    _program_cache._loaded.clear()
+    _program_cache._compiled.clear()
+    with pytest.warns(RuntimeWarning, match="unreadable compiled program"):
+        out = _program_cache.call(_toy, x, 1.5, 3)
+    np.testing.assert_array_equal(np.asarray(out["y"]), expected)
+    assert _program_cache._load_executable(str(executable)) is not None  # written again
+
+
 def test_the_command_line_puts_it_beside_the_compilation_cache(tmp_path, monkeypatch):
     from jaxdeploy import _compilation_cache
 
