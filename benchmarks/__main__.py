@@ -21,6 +21,8 @@ import time
 # The code whose changes make the page stale (tests/test_page_freshness.py).
 MEASURES = [
     "benchmarks",
+    "jaxdeploy/_compilation_cache.py",
+    "jaxdeploy/_program_cache.py",
     "jaxdeploy/analysis",
     "jaxdeploy/batch.py",
     "jaxdeploy/cli.py",
