@@ -60,7 +60,8 @@ def check_range(
     else:
         bad |= arr >= high
     if np.any(bad):
-        shown = arr[bad].ravel()[0] if arr.ndim else arr.item()
+        # A Python number, so the message prints 0.00108, not np.float64(0.00108).
+        shown = (arr[bad].ravel()[0] if arr.ndim else arr).item()
         raise ValueError(
             f"{name} = {shown!r}{unit_txt} is invalid: it must be finite and in {valid}."
         )

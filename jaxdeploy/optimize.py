@@ -73,7 +73,8 @@ class Box:
         for name, (lo, hi) in self.bounds.items():
             if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
                 raise ValueError(
-                    f"bounds of {name!r} = ({lo!r}, {hi!r}) are invalid: need finite low < high"
+                    f"bounds of {name!r} = ({float(lo)!r}, {float(hi)!r}) are invalid: need "
+                    "finite low < high"
                 )
 
     @property
@@ -98,7 +99,7 @@ class Box:
             value = float(x[name])
             if not lo < value < hi:
                 raise ValueError(
-                    f"start value {name} = {value!r} must lie strictly inside ({lo}, {hi})"
+                    f"start value {name} = {float(value)!r} must lie strictly inside ({lo}, {hi})"
                 )
             if lo > 0:
                 s = (math.log(value) - math.log(lo)) / (math.log(hi) - math.log(lo))
@@ -262,7 +263,7 @@ class Scatter:
     def __post_init__(self):
         for name, s in {**self.relative, **self.absolute}.items():
             if not (math.isfinite(s) and s > 0):
-                raise ValueError(f"scatter of {name!r} = {s!r} is invalid: it must be > 0")
+                raise ValueError(f"scatter of {name!r} = {float(s)!r} is invalid: it must be > 0")
         if self.pairs < 1:
             raise ValueError(f"pairs = {self.pairs!r} is invalid: it must be ≥ 1")
 

@@ -67,3 +67,11 @@ def test_hertz_impact_episode_against_johnsons_closed_forms():
     np.testing.assert_allclose(
         row["peak_force_time"], row["onset_time"] + duration / 2, rtol=0, atol=1e-9
     )
+    # The command line's episodes.csv: units in the header, one row, numbers as numbers.
+    from jaxdeploy.analysis import episodes_csv
+
+    lines = episodes_csv(scene.build(params), trajectory).splitlines()
+    assert lines[0].startswith("joint,bearing,journal,episode,onset_time [s],impact_velocity [m/s]")
+    assert "peak_force [N]" in lines[0] and "impulse [N s]" in lines[0]
+    assert len(lines) == 2 and lines[1].startswith("0,ground,journal,0,")
+    np.testing.assert_allclose(float(lines[1].split(",")[4]), row["onset_time"], rtol=0)

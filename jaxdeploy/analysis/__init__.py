@@ -6,7 +6,7 @@ not import it (data flows scene → simulate → analysis, docs/architecture.md)
 """
 
 from .base import Analysis
-from .contact_forces import clearance_joint_history
+from .contact_forces import clearance_joint_history, episodes_csv
 from .deploy_array import DeployArrayAnalysis
 from .pendulum import PendulumAnalysis
 from .slider_crank import SliderCrankAnalysis
@@ -30,6 +30,7 @@ def analyse(scene, params, mechanism, trajectory, reference=None) -> Analysis:
 
 
 __all__ = [
+    "episodes_csv",
     "ANALYSES",
     "Analysis",
     "DeployArrayAnalysis",

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mechanism import Mechanism, RevoluteClearance, contact_history
+from ..solvers.episodes import FIELDS, UNITS
 
 
 def clearance_joint_history(mechanism: Mechanism, trajectory) -> dict[int, dict]:
@@ -50,3 +51,22 @@ def acceleration_extremes(trajectory, coordinate: int) -> tuple[float, float]:
         )
     acc = np.asarray(trajectory.qdd)[:, coordinate]
     return float(np.min(acc)), float(np.max(acc))
+
+
+def episodes_csv(mechanism: Mechanism, trajectory) -> str:
+    """The contact episodes of every clearance joint (`Trajectory.contact_episodes()`) as CSV
+    text: one row per episode, the joint (element index, bearing and journal bodies) and the
+    episode's number first, then each field with its unit in the header, e.g.
+    `onset_time [s]`. A separation that did not happen before the run ended is an empty field
+    (never a number). Header only for a run without clearance joints or episodes."""
+    header = ["joint", "bearing", "journal", "episode"] + [f"{f} [{UNITS[f]}]" for f in FIELDS]
+    lines = [",".join(header)]
+    joints = mechanism.find(RevoluteClearance)
+    for index, table in zip(joints, trajectory.contact_episodes(), strict=True):
+        joint = mechanism.elements[index]
+        for number, row in enumerate(table.rows()):
+            values = ["" if np.isnan(row[f]) else repr(row[f]) for f in FIELDS]
+            lines.append(
+                ",".join([str(index), joint.bearing_body, joint.journal_body, str(number)] + values)
+            )
+    return "\n".join(lines) + "\n"

@@ -12,9 +12,16 @@ import math
 import sys
 
 STEP_CONTROL_FLAGS = ("--solver", "--rtol", "--atol", "--dt-max", "--dt")
+# Named here for the help texts, which must not import JAX: the presets of
+# `jaxdeploy.objectives.PRESETS` and `jaxdeploy.sweep.DEFAULT_CHUNK_SIZE` (tests/test_cli_help.py
+# checks that they agree).
+OBJECTIVE_PRESETS = ("paper", "paper_reproducible", "quiet", "fast_decay")
+SWEEP_CHUNK_SIZE = 64
+RTOL_FLOOR = 1e-10  # jaxdeploy.fit.RTOL_FLOOR: the tightest rtol the fit chooses
 SET_HELP = (
     "scene parameter NAME=VALUE in SI units (repeatable, each NAME once); `jaxdeploy scenes "
-    "SCENE` lists the parameters with their units and valid ranges"
+    "SCENE` lists the parameters with their units and valid ranges; default: none (the "
+    "scene's defaults)"
 )
 
 
@@ -48,6 +55,7 @@ def number_in(
             )
         return value
 
+    parse.unit = unit  # the help must name it (tests/test_cli_help.py)
     return parse
 
 
@@ -82,15 +90,18 @@ def _solver_name(text: str) -> str:
     return text
 
 
-def add_step_control(parser) -> None:
+def add_step_control(parser, unset: str | None = None, default: str = "the scene's") -> None:
     """The one argument group of solver and step control, for every command that runs
     simulations (`simulate`, `sweep`, `fit`, `optimize`); `step_control(args, scene)` turns
-    it into a `StepControl`."""
+    it into a `StepControl`. `unset`: what the group's description says happens to unset
+    values (default: they keep the scene's default); `default`: each flag's default, as its
+    help says it."""
+    if unset is None:
+        unset = "Unset values keep the scene's default (`jaxdeploy scenes SCENE` lists it)."
     group = parser.add_argument_group(
         "solver and step control",
-        "Unset values keep the scene's default (`jaxdeploy scenes SCENE` lists it). --rtol or "
-        "--atol: adaptive steps; --dt alone: fixed steps of that size. Recorded with the "
-        "result.",
+        f"{unset} --rtol or --atol: adaptive steps; --dt alone: fixed steps of that size. "
+        "Recorded with the result.",
     )
     group.add_argument(
         "--solver",
@@ -100,32 +111,34 @@ def add_step_control(parser) -> None:
         help="generalized_alpha (index-3, implicit), or on the index-1 path tsit5, dopri5, "
         "dopri8 (explicit), kvaerno3, kvaerno4, kvaerno5 (implicit); auto: tsit5, or dopri8 "
         "at a tight rtol (auto:NAME: NAME instead of tsit5; docs/solver_by_tolerance.md). "
-        "summary.json records the solver that ran",
+        f"summary.json records the solver that ran. Default: {default}",
     )
     group.add_argument(
         "--rtol",
         type=number_in("--rtol", 0.0, 1.0, high_open=True),
         default=None,
-        help="relative tolerance of an adaptive step, in (0, 1)",
+        help="relative tolerance of an adaptive step, in (0, 1) (dimensionless); default: "
+        + default,
     )
     group.add_argument(
         "--atol",
         type=positive("--atol"),
         default=None,
         help="absolute tolerance of an adaptive step (positions in m and rad, velocities in "
-        "m/s and rad/s), > 0",
+        f"m/s and rad/s), > 0; default: {default}",
     )
     group.add_argument(
         "--dt-max",
         type=positive("--dt-max", "s"),
         default=None,
-        help="largest adaptive step [s], > 0",
+        help=f"largest adaptive step [s], > 0; default: {default}",
     )
     group.add_argument(
         "--dt",
         type=positive("--dt", "s"),
         default=None,
-        help="fixed step [s] (alone), or the first adaptive step with --rtol/--atol, > 0",
+        help="fixed step [s] (alone), or the first adaptive step with --rtol/--atol, > 0; "
+        f"default: {default}",
     )
 
 
@@ -186,7 +199,8 @@ def parse_assignments(items, flag: str = "--set") -> dict[str, float]:
 
 SCENE_OPTION_HELP = (
     "scene option KEY=VALUE (repeatable), e.g. impact_velocity_rule=running_max; "
-    "`jaxdeploy scenes SCENE` lists a scene's options with their choices"
+    "`jaxdeploy scenes SCENE` lists a scene's options with their choices; default: none (the "
+    "scene's defaults)"
 )
 
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 import sys
 
 from ._args import (
+    RTOL_FLOOR,
     SCENE_OPTION_HELP,
     SET_HELP,
     add_step_control,
@@ -44,7 +45,7 @@ HELP = "fit scene parameters to measured channels (CSV/npz), with uncertainties"
 
 def add_arguments(parser) -> None:
     parser.add_argument("data", help="measurements: .csv or .npz (time column t + channels)")
-    parser.add_argument("--scene", required=True, help="scene name, e.g. deploy_array")
+    parser.add_argument("--scene", required=True, help="scene name, e.g. deploy_array (required)")
     parser.add_argument(
         "--params",
         nargs="+",
@@ -74,34 +75,42 @@ def add_arguments(parser) -> None:
         action="append",
         default=[],
         metavar="[CHANNEL=]SIGMA",
-        help="noise level (one standard deviation); overrides the file's",
+        help="noise level (one standard deviation, in the channel's unit); overrides the "
+        "file's; default: the file's",
     )
     parser.add_argument(
         "--loss",
         choices=("trajectory", "block", "smooth"),
         default="trajectory",
         help="pointwise residuals, block means (a low-pass feature) or Gaussian-smoothed "
-        "channels (--width)",
+        "channels (--width); default trajectory",
     )
     parser.add_argument(
-        "--block", type=positive("--block", "s"), default=None, help="block duration [s], > 0"
+        "--block",
+        type=positive("--block", "s"),
+        default=None,
+        help="block duration [s], > 0 (needed by --loss block; default: none)",
     )
     parser.add_argument(
-        "--width", type=positive("--width", "s"), default=None, help="smoothing width [s], > 0"
+        "--width",
+        type=positive("--width", "s"),
+        default=None,
+        help="smoothing width [s], > 0 (needed by --loss smooth; default: none)",
     )
     parser.add_argument(
         "--widths",
         default=None,
         metavar="W1,W2,...",
         help="continuation in resolution: fit the channels smoothed over W1 s, then W2, ... "
-        "(decreasing), then with --loss (trajectory or block; the uncertainties come from it)",
+        "(decreasing), then with --loss (trajectory or block; the uncertainties come from it); "
+        "default: none",
     )
     parser.add_argument(
         "--window",
         action="append",
         default=[],
         metavar="T0:T1",
-        help="fit only samples in [T0, T1] s (repeatable)",
+        help="fit only samples in [T0, T1] s (repeatable); default: every sample",
     )
     parser.add_argument(
         "--horizons",
@@ -115,7 +124,7 @@ def add_arguments(parser) -> None:
         "--max-iterations",
         type=integer_at_least("--max-iterations", 1),
         default=30,
-        help="Levenberg–Marquardt trial steps per stage, ≥ 1",
+        help="Levenberg–Marquardt trial steps per stage, ≥ 1 (default 30)",
     )
     parser.add_argument(
         "--starts",
@@ -125,10 +134,21 @@ def add_arguments(parser) -> None:
         help="global first stage: simulate N Latin-hypercube points within the bounds (one "
         "batch) and start from the best (default 0: start from the guess)",
     )
-    parser.add_argument("--seed", type=int, default=0, help="seed of the --starts sample")
+    parser.add_argument(
+        "--seed", type=int, default=0, help="seed of the --starts sample (default 0)"
+    )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing result")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
-    add_step_control(parser)
+    add_step_control(
+        parser,
+        unset="The fit chooses the model's tolerance itself (jaxdeploy.fit.choose_tolerance): "
+        "from the scene's default step control it tightens rtol until the model's error at the "
+        f"start is below the noise (not below rtol {RTOL_FLOOR:g}), then checks the estimate at "
+        "a 10x tighter rtol and refits there when it moves (exit 5 if no check passes down to "
+        "rtol 1e-12). A --rtol or --dt given is used as given and only checked. The solver and "
+        "the other unset values keep the scene's default (`jaxdeploy scenes SCENE`).",
+        default="chosen by the fit (see above)",
+    )
 
 
 def _fail(message: str, code: int = EXIT_REFUSED) -> int:

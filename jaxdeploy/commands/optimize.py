@@ -8,6 +8,7 @@ from __future__ import annotations
 import sys
 
 from ._args import (
+    OBJECTIVE_PRESETS,
     SCENE_OPTION_HELP,
     SET_HELP,
     add_step_control,
@@ -26,7 +27,9 @@ DEFAULT_PARAMS = ("panel1_ra", "panel2_ra", "panel1_clearance", "panel2_clearanc
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--scene", default="deploy_array", help="scene (needs panel channels)")
+    parser.add_argument(
+        "--scene", default="deploy_array", help="scene (needs panel channels; default deploy_array)"
+    )
     parser.add_argument(
         "--scene-option", action="append", default=[], metavar="KEY=VALUE", help=SCENE_OPTION_HELP
     )
@@ -35,8 +38,9 @@ def add_arguments(parser) -> None:
         action="append",
         default=[],
         metavar="PANEL:FEATURE=WEIGHT",
-        help="objective terms or a preset (paper, paper_reproducible, quiet, fast_decay); "
-        "repeatable",
+        help="objective terms PANEL:FEATURE=WEIGHT or a preset ("
+        + ", ".join(OBJECTIVE_PRESETS)
+        + "); repeatable; default: paper",
     )
     parser.add_argument(
         "--param",
@@ -59,33 +63,47 @@ def add_arguments(parser) -> None:
         "--t-end", type=positive("--t-end", "s"), default=0.75, help="horizon [s] (default 0.75)"
     )
     parser.add_argument(
-        "--n-save", type=integer_at_least("--n-save", 2), default=1501, help="saved states, ≥ 2"
+        "--n-save",
+        type=integer_at_least("--n-save", 2),
+        default=1501,
+        help="saved states, ≥ 2 (default 1501)",
     )
     parser.add_argument(
-        "--steps", type=integer_at_least("--steps", 1), default=12, help="gradient evaluations"
+        "--steps",
+        type=integer_at_least("--steps", 1),
+        default=12,
+        help="gradient evaluations, ≥ 1 (default 12)",
     )
     parser.add_argument(
         "--learning-rate",
         type=positive("--learning-rate"),
         default=0.25,
-        help="Adam step in the reparametrised coordinate u, > 0",
+        help="Adam step in the reparametrised (dimensionless) coordinate u, > 0 (default 0.25)",
     )
     parser.add_argument(
         "--gradient",
         choices=("smoothed", "pathwise"),
         default="smoothed",
         help="smoothed: Stein estimate on a Gaussian smoothing (robust to chatter); "
-        "pathwise: AD through the solver (forward mode up to 6 parameters, reverse above)",
+        "pathwise: AD through the solver (forward mode up to 6 parameters, reverse above); "
+        "default smoothed",
     )
     # deploy_array's objectives are rough below about half a unit of ln Ra (contact events
     # shift with the design): smoothing at s = 0.1 follows that roughness, at 0.5 the trend
     # (the 9x9 design study of commit d3c11ca, its section "Gradient-based optimum": `git show
     # d3c11ca:docs/design.md`; today's docs/design.md reruns a 4x4 grid only).
     parser.add_argument(
-        "--smoothing", type=positive("--smoothing"), default=0.5, help="s in ln x (smoothed), > 0"
+        "--smoothing",
+        type=positive("--smoothing"),
+        default=0.5,
+        help="standard deviation of the Gaussian smoothing in ln x (dimensionless; --gradient "
+        "smoothed), > 0 (default 0.5)",
     )
     parser.add_argument(
-        "--pairs", type=integer_at_least("--pairs", 1), default=4, help="antithetic pairs per step"
+        "--pairs",
+        type=integer_at_least("--pairs", 1),
+        default=4,
+        help="antithetic pairs per step, ≥ 1 (default 4)",
     )
     parser.add_argument(
         "--robust",
@@ -93,15 +111,22 @@ def add_arguments(parser) -> None:
         help="minimise E[J] under manufacturing scatter (--tol-ra, --tol-clearance)",
     )
     parser.add_argument(
-        "--tol-ra", type=positive("--tol-ra"), default=0.25, help="Ra log-normal s, > 0"
+        "--tol-ra",
+        type=positive("--tol-ra"),
+        default=0.25,
+        help="manufacturing scatter of the roughness Ra: the standard deviation of ln Ra "
+        "(dimensionless, log-normal; --robust), > 0 (default 0.25)",
     )
     parser.add_argument(
         "--tol-clearance",
         type=positive("--tol-clearance", "m"),
         default=5e-6,
-        help="clearance σ [m], > 0",
+        help="manufacturing scatter of the clearance: its standard deviation [m] (--robust), "
+        "> 0 (default 5e-06 m)",
     )
-    parser.add_argument("--seed", type=int, default=0, help="seed of the smoothing draws")
+    parser.add_argument(
+        "--seed", type=int, default=0, help="seed of the smoothing draws (default 0)"
+    )
     parser.add_argument(
         "--out", default=None, help="output folder (default results/optimize/SCENE-DATE-TIME)"
     )

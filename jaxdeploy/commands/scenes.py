@@ -18,7 +18,8 @@ def add_arguments(parser) -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="describe the scene with these options (e.g. ideal=true: the parameters it has)",
+        help="describe the scene with these options (e.g. ideal=true: the parameters it has); "
+        "default: none",
     )
 
 

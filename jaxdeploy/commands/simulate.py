@@ -58,7 +58,10 @@ def add_arguments(parser) -> None:
         "--scene-option", action="append", default=[], metavar="KEY=VALUE", help=SCENE_OPTION_HELP
     )
     parser.add_argument(
-        "--t-end", type=positive("--t-end", "s"), default=None, help="end time [s], > 0"
+        "--t-end",
+        type=positive("--t-end", "s"),
+        default=None,
+        help="end time [s], > 0; default: the scene's (`jaxdeploy scenes SCENE`)",
     )
     parser.add_argument(
         "--out",
@@ -69,7 +72,7 @@ def add_arguments(parser) -> None:
         "--n-save",
         type=integer_at_least("--n-save", 2),
         default=2001,
-        help="number of saved states, ≥ 2",
+        help="number of saved states, equally spaced over [0, t_end], ≥ 2 (default 2001)",
     )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing result")
     parser.add_argument(
@@ -252,8 +255,15 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
     import jax.numpy as jnp
 
     from .. import _program_cache
-    from ..analysis import analysis_class
-    from ..io import atomic_write_json, atomic_write_npz, prepare_output_dir, strict_json
+    from ..analysis import analysis_class, episodes_csv
+    from ..io import (
+        atomic_write_bytes,
+        atomic_write_json,
+        atomic_write_npz,
+        prepare_output_dir,
+        strict_json,
+    )
+    from ..mechanism import RevoluteClearance
     from ..simulation import simulate
     from ..solvers.step_control import scene_default_choice
     from ._results import run_quantities, units_of
@@ -320,6 +330,11 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
             qdd=trajectory.qdd,
             lam=trajectory.lam,
         )
+        written = ["summary.json", "trajectory.npz"]
+        if mechanism.find(RevoluteClearance):
+            # One row per contact episode of each clearance joint, units in the header.
+            atomic_write_bytes(f"{out}/episodes.csv", episodes_csv(mechanism, trajectory).encode())
+            written.append("episodes.csv")
     with phases.phase("plots"):
         figures = analysis.plot(out)
     summary["phases"] = dict(phases.durations)
@@ -340,7 +355,9 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
         }
         print(strict_json(shown, indent=2))
         print(
-            f"wrote {out}/summary.json, {out}/trajectory.npz" + "".join(f", {f}" for f in figures)
+            "wrote "
+            + ", ".join(f"{out}/{name}" for name in written)
+            + "".join(f", {f}" for f in figures)
         )
     if not trajectory.ok:
         print(f"error: the run {trajectory.status()}", file=sys.stderr)

@@ -9,8 +9,10 @@ import os
 import sys
 
 from ._args import (
+    OBJECTIVE_PRESETS,
     SCENE_OPTION_HELP,
     SET_HELP,
+    SWEEP_CHUNK_SIZE,
     add_step_control,
     check_used,
     integer_at_least,
@@ -25,14 +27,14 @@ HELP = "parameter sweep: vmapped, sharded, chunked, resumable"
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--scene", default="deploy_array", help="scene name")
+    parser.add_argument("--scene", default="deploy_array", help="scene name (default deploy_array)")
     parser.add_argument(
         "--grid",
         action="append",
         default=[],
         metavar="NAME=VALUES",
         help="a swept parameter (repeatable, each NAME once): v1,v2,... or LOW:HIGH:N (linear) "
-        "or LOW:HIGH:N:log (geometric), SI units",
+        "or LOW:HIGH:N:log (geometric), SI units; default: none (one case)",
     )
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help=SET_HELP)
     parser.add_argument(
@@ -45,20 +47,23 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--resume", action="store_true", help="continue the sweep in --out")
     parser.add_argument(
-        "--t-end", type=positive("--t-end", "s"), default=None, help="end time [s], > 0"
+        "--t-end",
+        type=positive("--t-end", "s"),
+        default=None,
+        help="end time [s], > 0; default: the scene's (`jaxdeploy scenes SCENE`)",
     )
     parser.add_argument(
         "--n-save",
         type=integer_at_least("--n-save", 2),
         default=201,
-        help="saved states per case, ≥ 2",
+        help="saved states per case, ≥ 2 (default 201)",
     )
     parser.add_argument(
         "--chunk-size",
         type=integer_at_least("--chunk-size", 1),
         default=None,
-        help="cases per compiled run (memory, resume granularity), ≥ 1; default "
-        "jaxdeploy.sweep.DEFAULT_CHUNK_SIZE",
+        help="cases per compiled run (memory, resume granularity), ≥ 1 (default "
+        f"{SWEEP_CHUNK_SIZE})",
     )
     parser.add_argument(
         "--policy",
@@ -72,7 +77,9 @@ def add_arguments(parser) -> None:
         action="append",
         default=[],
         metavar="PANEL:FEATURE=WEIGHT",
-        help="design objective terms or a preset, stored per case (deploy_array)",
+        help="design objective terms PANEL:FEATURE=WEIGHT or a preset ("
+        + ", ".join(OBJECTIVE_PRESETS)
+        + "), stored per case (deploy_array; repeatable); default: none",
     )
     parser.add_argument("--no-trajectories", action="store_true", help="store no q, v")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")

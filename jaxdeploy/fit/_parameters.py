@@ -129,14 +129,16 @@ def make_parameters(scene, specs: Sequence, defaults: Mapping | None = None) -> 
                 f"{name}: give finite bounds (NAME=guess:low:high); the valid range is {valid}"
             )
         if not low < high:
-            raise ValueError(f"{name}: bounds low = {low!r} and high = {high!r} need low < high")
+            raise ValueError(
+                f"{name}: bounds low = {float(low)!r} and high = {float(high)!r} need low < high"
+            )
         if low < ps.low or high > ps.high:
             raise ValueError(
                 f"{name}: bounds [{low:g}, {high:g}]{unit} are invalid: they must lie in {valid}"
             )
         if not low < guess < high:
             raise ValueError(
-                f"{name} = {guess!r}{unit} (initial guess) is invalid: it must lie strictly "
+                f"{name} = {float(guess)!r}{unit} (initial guess) is invalid: it must lie strictly "
                 f"inside the bounds ({low:g}, {high:g}){unit}"
             )
         out.append(FitParameter(name, float(guess), float(low), float(high)))
