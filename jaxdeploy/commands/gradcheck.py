@@ -69,7 +69,10 @@ def add_arguments(parser) -> None:
         help="AD modes (the first is judged, the others reported; default forward reverse)",
     )
     parser.add_argument(
-        "--n-save", type=integer_at_least("--n-save", 2), default=2, help="saved states, ≥ 2"
+        "--n-save",
+        type=integer_at_least("--n-save", 2),
+        default=2,
+        help="saved states, ≥ 2 (default 2)",
     )
     parser.add_argument(
         "--out", default=None, help="output folder (default results/gradcheck/SCENE-DATE-TIME)"
