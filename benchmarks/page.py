@@ -222,6 +222,40 @@ def breakdown_lines(bd) -> list[str]:
     ]
 
 
+def program_parts_lines(pp) -> list[str]:
+    """What XLA compiles in the Tsit5 program and what each part costs it
+    (`work_precision.program_parts`), or nothing for a record without it."""
+    if not pp or "error" in pp or "full" not in pp:
+        return []
+    full = pp["full"]
+    parts = full["operations_by_part"]
+    lines = [
+        f"What XLA compiles (the Tsit5 program above, rtol {pp['rtol']:.0e}, q and q̇ saved; "
+        "`work_precision.program_parts`, CPU seconds of the bench's process): tracing and "
+        f"lowering {full['trace_lower_cpu_s']:.2f} s, XLA's compile "
+        f"{full['xla_compile_cpu_s']:.2f} s for {full['operations']} operations (every "
+        "instruction of the optimised program, fusions' insides included). Operations by the "
+        "part that produced them (the name of the function traced once per program on each): "
+        + ", ".join(f"{k} {v}" for k, v in parts.items())
+        + " (end-time threshold: diffrax's t1 − 100 ULP, computed once per solve by 100 "
+        "chained `nextafter`, outside the loop; loop: diffrax's integration loop, the stage "
+        "arithmetic, the step-size controller, event location, the dense output and the save "
+        "loop). Each part's compile time is measured by compiling the program without it:",
+        "",
+        "| program | operations | XLA compile [CPU s] | the part's share [CPU s] |",
+        "|---|---|---|---|",
+        f"| full | {full['operations']} | {full['xla_compile_cpu_s']:.2f} | |",
+    ]
+    for name, st in pp.items():
+        if name == "full" or not isinstance(st, dict) or "operations" not in st:
+            continue
+        lines.append(
+            f"| {name} | {st['operations']} | {st['xla_compile_cpu_s']:.2f} | "
+            f"{full['xla_compile_cpu_s'] - st['xla_compile_cpu_s']:.2f} |"
+        )
+    return lines + [""]
+
+
 def _compile_phases_text(new_process) -> str:
     """Where the cold new-process first calls went (`work_precision._compile_phases`), or
     nothing for a record without it."""
@@ -446,6 +480,7 @@ def render(record, wp, targets, *, command, cut) -> str:
         )
     lines.append("")
     lines += breakdown_lines(wp.get("breakdown"))
+    lines += program_parts_lines(wp.get("program_parts"))
     lines += generalized_alpha_lines(wp.get("generalized_alpha_step"), rows)
     if b:
         lines += [
@@ -638,6 +673,33 @@ def simulate_phases(s: dict) -> list[str]:
     return lines
 
 
+def _program(run) -> str:
+    """`XLA compile [CPU s] | operations` of a gradient-part run (`programs.compile_stats`)."""
+    p = run.get("program")
+    if not p:
+        return "– | –"
+    return f"{p['xla_compile_cpu_s']:.3g} | {p['operations']}"
+
+
+def _slider_crank_programs(sc) -> list[str]:
+    """slider_crank's gradient programs' compile (`targets.slider_crank_gradient_programs`)."""
+    if not sc:
+        return []
+    cells = "; ".join(
+        f"{mode} mode {sc[mode]['xla_compile_cpu_s']:.3g} CPU s of XLA compile for "
+        f"{sc[mode]['operations']} operations (tracing and lowering "
+        f"{sc[mode]['trace_lower_cpu_s']:.3g} s; warm {sc[mode]['warm_s']:.3g} s)"
+        for mode in ("forward", "reverse")
+    )
+    return [
+        f"slider_crank's gradient programs (a loss of the slider's acceleration over "
+        f"{sc['t_end_s'] * 1e3:g} ms, with respect to "
+        + ", ".join(f"`{w}`" for w in sc["wrt"])
+        + f"): {cells}.",
+        "",
+    ]
+
+
 def gradient_section(g) -> list[str]:
     """The gradient's costs in both modes and its check against central differences."""
     fwd, rev, rep, base = (g["gradient_forward"], g["gradient_reverse"], g["replay"],
@@ -655,16 +717,25 @@ def gradient_section(g) -> list[str]:
         f"takes {g['auto_mode']} mode here (`gradient_mode`: forward up to "
         "`FORWARD_MODE_MAX_PARAMETERS` parameters). Warm: best of the rounds, taken in turn.",
         "",
-        "| run | compile [s] | warm [s] | warm / forward run |",
-        "|---|---|---|---|",
-        f"| forward run (the loss) | {base['compile_s']:.3g} | {base['warm_s']:.3g} | 1 |",
+        "| run | compile [s] | XLA compile [CPU s] | operations | warm [s] | warm / forward run |",
+        "|---|---|---|---|---|---|",
+        f"| forward run (the loss) | {base['compile_s']:.3g} | {_program(base)} | "
+        f"{base['warm_s']:.3g} | 1 |",
         f"| forward run, steps replayed (the loss; what every gradient pays first) | "
-        f"{rep['compile_s']:.3g} | {rep['warm_s']:.3g} | {g['replay_ratio']:.2f} |",
+        f"{rep['compile_s']:.3g} | {_program(rep)} | {rep['warm_s']:.3g} | "
+        f"{g['replay_ratio']:.2f} |",
         f"| gradient, forward mode (`jax.jacfwd`, `diffrax.ForwardMode`) | "
-        f"{fwd['compile_s']:.3g} | {fwd['warm_s']:.3g} | {g['ratio_forward']:.2f} |",
+        f"{fwd['compile_s']:.3g} | {_program(fwd)} | {fwd['warm_s']:.3g} | "
+        f"{g['ratio_forward']:.2f} |",
         f"| gradient, reverse mode (`jax.value_and_grad`, `RecursiveCheckpointAdjoint`) | "
-        f"{rev['compile_s']:.3g} | {rev['warm_s']:.3g} | {g['ratio_reverse']:.2f} |",
+        f"{rev['compile_s']:.3g} | {_program(rev)} | {rev['warm_s']:.3g} | "
+        f"{g['ratio_reverse']:.2f} |",
         "",
+        "compile: the first call's wall time less the warm one; XLA compile: CPU seconds of "
+        "the bench's process in XLA's compile alone, and the compiled program's operations "
+        "(`benchmarks/programs.py`).",
+        "",
+        *_slider_crank_programs(g.get("slider_crank_programs")),
         f"The two modes' gradients differ by {g['modes_max_relative_difference']:.1e} "
         f"(largest relative difference over the parameters). The run takes {st['accepted']} "
         f"accepted and {st['rejected']} rejected steps; reverse mode's default "

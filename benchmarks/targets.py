@@ -177,6 +177,8 @@ def step_solves_ceiling(cases: int = 256, iterations: int = 2000) -> dict:
 
 
 GRADIENT_WRT = ("restitution", "friction_coefficient", "panel1_clearance", "panel2_clearance")
+# slider_crank's gradient programs (`slider_crank_gradient_programs`): compile, not the loss.
+SLIDER_CRANK_WRT = ("restitution", "clearance")
 GRADIENT_FD_STEPS = (1e-3, 1e-5, 1e-7)  # relative steps of the central differences
 # Memory flags whose flip between two runs over the same steps switches the discrete map:
 # a clearance joint's contact state, a latch's engagement.
@@ -199,6 +201,8 @@ def gradient(t_end: float = 0.2, repeats: int = 2, fd_steps=GRADIENT_FD_STEPS) -
     from jaxdeploy.fit import gradient_function, gradient_mode
     from jaxdeploy.scenes import DeployArray
 
+    from .programs import compile_stats
+
     scene = DeployArray()
     base = scene.resolve_params()
     x0 = {k: jnp.asarray(base[k]) for k in GRADIENT_WRT}
@@ -219,16 +223,20 @@ def gradient(t_end: float = 0.2, repeats: int = 2, fd_steps=GRADIENT_FD_STEPS) -
         g, _ = gradient_function(scene, base, GRADIENT_WRT, loss, t_end, mode=mode, n_save=201)
         functions[f"gradient_{mode}"] = jax.jit(g)
     out = {"scene": "deploy_array", "t_end_s": t_end, "wrt": list(GRADIENT_WRT)}
-    first, values = {}, {}
+    first, values, programs = {}, {}, {}
     for name, fn in functions.items():
-        first[name], values[name] = _timed(fn, x0)
+        # The first call, compile included, as phases: trace and lower, XLA's compile (CPU
+        # seconds of this process and the program's size: `programs.compile_stats`), run.
+        functions[name], programs[name] = compile_stats(fn, x0)
+        first[name], values[name] = _timed(functions[name], x0)
+        first[name] += programs[name]["compile_wall_s"]
     warm = {name: [] for name in functions}
     for _ in range(repeats):
         for name, fn in functions.items():
             warm[name].append(_timed(fn, x0)[0])
     for name in functions:
         best = min(warm[name])
-        out[name] = {"compile_s": first[name] - best, "warm_s": best}
+        out[name] = {"compile_s": first[name] - best, "warm_s": best, "program": programs[name]}
     stats = values["forward"][1]
     max_steps = int(stats["max_steps"])
     out["steps"] = {"accepted": int(stats["num_accepted_steps"]),
@@ -249,9 +257,39 @@ def gradient(t_end: float = 0.2, repeats: int = 2, fd_steps=GRADIENT_FD_STEPS) -
     out["ratio"] = out[f"ratio_{out['auto_mode']}"]
     out["replay_ratio"] = out["replay"]["warm_s"] / out["forward"]["warm_s"]
     out["rhs"] = rhs_cost(scene, base)
+    out["slider_crank_programs"] = slider_crank_gradient_programs()
     out["central_differences"] = gradient_check(
         scene, base, loss, t_end, grads[out["auto_mode"]], fd_steps
     )
+    return out
+
+
+def slider_crank_gradient_programs(t_end: float = 4e-3) -> dict:
+    """The compile of `jaxdeploy.fit.gradient_function`'s programs for slider_crank (both
+    modes; `programs.compile_stats`): a loss of the slider's acceleration over `t_end` (201
+    samples, the scene's default step control) with respect to `SLIDER_CRANK_WRT`, and one
+    warm call each."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxdeploy.fit import gradient_function
+    from jaxdeploy.scenes import SliderCrank
+
+    from .programs import compile_stats
+
+    scene = SliderCrank()
+    base = scene.resolve_params()
+
+    def loss(channels):
+        return jnp.mean(channels["slider_ax"] ** 2)
+
+    out = {"scene": "slider_crank", "t_end_s": t_end, "wrt": list(SLIDER_CRANK_WRT)}
+    for mode in ("forward", "reverse"):
+        g, x0 = gradient_function(scene, base, SLIDER_CRANK_WRT, loss, t_end, mode=mode,
+                                  n_save=201)  # fmt: skip
+        compiled, stats = compile_stats(jax.jit(g), x0)
+        _timed(compiled, x0)
+        out[mode] = {**stats, "warm_s": _timed(compiled, x0)[0]}
     return out
 
 

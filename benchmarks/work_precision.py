@@ -366,6 +366,7 @@ def measure(quick: bool = False, repeats: int = 3, log=print, root: str = ".") -
         "exudyn": exudyn_version() if exudyn else None,
         "new_process": new_process,
         "breakdown": breakdown(ours, ts, repeats=5 if quick else 20),
+        "program_parts": program_parts(ours, ts),
         "generalized_alpha_step": None if quick else generalized_alpha_operations(ours, ts),
         "rows": [asdict(r) for r in rows],
     }
@@ -513,6 +514,44 @@ def loop_operations(ours, ts, control) -> dict:
         "stage_body": count(stages[0]) if len(stages) == 1 else None,
         "save_body": count(saves[0]) if len(saves) == 1 else None,
     }
+
+
+def program_parts(ours, ts, rtol: float = 1e-5) -> dict:
+    """What XLA compiles in `breakdown`'s Tsit5 program (`ts`: 4001 saved times, q and q̇
+    saved) and what each part costs it: the whole program (`programs.compile_stats`: CPU
+    seconds of tracing and lowering and of XLA's compile, operations, operations by part),
+    then the same program with one part left out — the projection onto the constraints,
+    the extremes' interior samples, event location — so that the difference in XLA's CPU
+    seconds is that part's compile time (a measurement: operations alone do not say what
+    XLA spends on them). The accelerations cannot be left out; their share is in the counts."""
+    from dataclasses import replace
+
+    from jaxdeploy.simulation import _solve, prepare
+
+    from .programs import compile_stats
+
+    control = _control(ours.control, Config("", "jaxdeploy", "tsit5", rtol=rtol))
+
+    def without_projection(solver):  # TrackExtremes(MechanismODESolver(Tsit5))
+        return replace(solver, solver=replace(solver.solver, project=False))
+
+    variants = {
+        "full": (control, {}, None),
+        "without projection": (control, {}, without_projection),
+        "without extremes' interior samples": (control, {"extreme_samples": 0}, None),
+        "without event location": (control.replace(locate_events=False), {}, None),
+    }
+    out = {"solver": "tsit5", "rtol": rtol, "outputs": "motion"}
+    try:
+        for name, (chosen, options, change) in variants.items():
+            run = prepare(ours.mech, ours.s0, float(ts[-1]), ts=ts, control=chosen, **options)
+            solver = change(run.solver) if change else run.solver
+            args = (ours.mech, run.y0, run.t0, run.t_end, run.dt0, run.ts, solver,
+                    run.controller, run.max_steps, False, run.adjoint, "motion")  # fmt: skip
+            out[name] = compile_stats(_solve, *args)[1]
+    except Exception as err:  # reads XLA's text, which may change: not a lost part
+        out["error"] = f"{type(err).__name__}: {err}"
+    return out
 
 
 if __name__ == "__main__":

@@ -152,6 +152,52 @@ def test_compile_phases_listener_sums_jax_compile_events():
     assert phases["trace"] > 0.0 and phases["lower"] > 0.0 and phases["xla_compile"] > 0.0
 
 
+def test_compile_stats_attribute_operations_to_the_parts_traced_once():
+    """Each operation is counted once, under the traced-once function that produced it (the
+    innermost wins), diffrax's end-time threshold (chained `nextafter` outside any loop) under
+    its own name, the rest under "loop"; and the page's table subtracts each variant's
+    compile from the whole program's."""
+    import equinox.internal as eqxi
+    import jax
+    import jax.numpy as jnp
+
+    from benchmarks.programs import compile_stats
+    from jaxdeploy._tracing import traced_once
+
+    @traced_once
+    def project_onto_constraints(x):
+        return jnp.cos(x) * 3.0
+
+    @traced_once
+    def _accelerations(x):
+        return jnp.sin(project_onto_constraints(x)) + 1.0
+
+    def program(x, t1):
+        for _ in range(3):
+            t1 = eqxi.prevbefore(t1)
+        return jnp.exp(_accelerations(x)), t1
+
+    jitted = jax.jit(program)
+    compiled, stats = compile_stats(jitted, jnp.arange(3.0), jnp.asarray(1.0))
+    parts = stats["operations_by_part"]
+    assert sum(parts.values()) == stats["operations"]
+    assert parts["accelerations"] > 0 and parts["projection"] > 0, parts
+    assert parts["end-time threshold"] > 0 and parts["loop"] > 0, parts
+    assert parts["memory update"] == parts["extremes"] == 0, parts
+    assert stats["xla_compile_cpu_s"] > 0.0
+    np.testing.assert_array_equal(
+        compiled(jnp.arange(3.0), 1.0)[0], jitted(jnp.arange(3.0), 1.0)[0]
+    )
+
+    quarter = {**stats, "xla_compile_cpu_s": stats["xla_compile_cpu_s"] / 4}
+    pp = {"rtol": 1e-5, "full": stats, "without projection": quarter}
+    lines = page.program_parts_lines(pp)
+    share = stats["xla_compile_cpu_s"] * 3 / 4
+    assert any(line.startswith("| without projection |") and f"| {share:.2f} |" in line
+               for line in lines), lines  # fmt: skip
+    assert page.program_parts_lines({"error": "x"}) == []
+
+
 def test_provenance_round_trips_through_the_page_header():
     record = provenance.finish(provenance.start(["benchmarks"], allow_dirty=True))
     text = "# page\n\n" + provenance.header(record, "make bench") + "\n\nbody\n"
