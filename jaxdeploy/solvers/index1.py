@@ -58,16 +58,31 @@ def project_onto_constraints(mechanism: Mechanism, q, v, t, iterations: int = 2)
     """Mass-weighted projection of `(q, q̇)` onto `Φ = 0`, `Φ_q q̇ + Φ_t = 0` (see module
     docstring; `saddle_point.least_change_correction`). `iterations` Gauss–Newton steps for
     positions (quadratic convergence: two take an O(tol) drift to roundoff), one linear
-    projection for velocities. Differentiable (plain unrolled linear algebra)."""
+    projection for velocities. Differentiable (a loop of fixed length: `lax.fori_loop`
+    with static bounds is a `scan`).
+
+    The `iterations + 1` corrections are one loop whose body serves both kinds: each pass
+    evaluates `Φ_q`, `Φ` and `Φ_t` at the current positions (`Φ` and `Φ_t` from one JVP in
+    t) and corrects the positions with `Φ`, or, in the last pass, the velocities with
+    `Φ_q q̇ + Φ_t`. Written out, the program held three copies of the Jacobian, the Schur
+    factorisation and its solves, a quarter of a Tsit5 simulation's XLA program and compile
+    time (slider_crank; `benchmarks/work_precision.py`, `program_parts`)."""
     if mechanism.n_constraints == 0:
         return q, v
     mass_inverse = 1.0 / mechanism.mass_diagonal()
-    for _ in range(iterations):
+
+    def correct(k, state):
+        q, v = state
         jac = mechanism.constraint_jacobian(q, t)
-        q = q - least_change_correction(mass_inverse, jac, mechanism.constraints(q, t))
-    jac = mechanism.constraint_jacobian(q, t)
-    residual = jac @ v - mechanism.constraint_velocity_rhs(q, t)
-    return q, v - least_change_correction(mass_inverse, jac, residual)
+        phi, phi_t = jax.jvp(lambda s: mechanism.constraints(q, s), (t,), (jnp.ones_like(t),))
+        on_positions = k < iterations
+        residual = jnp.where(on_positions, phi, jac @ v + phi_t)
+        correction = least_change_correction(mass_inverse, jac, residual)
+        return jnp.where(on_positions, q - correction, q), jnp.where(
+            on_positions, v, v - correction
+        )
+
+    return jax.lax.fori_loop(0, iterations + 1, correct, (q, v))
 
 
 class Index1Field(eqx.Module):
