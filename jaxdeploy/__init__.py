@@ -15,6 +15,11 @@ The names a user needs, in one place (the submodules behind them may move; these
 * the persistent caches: `enable_caches()` at the top of a script (or `JAXDEPLOY_CACHE_DIR`
   set before `import jaxdeploy`) keeps traced and compiled programs on disk, so a second
   process neither traces nor compiles what an earlier one did (the command line always does);
+* read a run (a `Trajectory`): `Trajectory.contact_episodes()` (each clearance joint's impacts:
+  onset, v⁻, separation, peak force, peak penetration, impulse), `clearance_joint_history`
+  (each clearance joint's eccentricity, penetration and contact forces at the saved times),
+  and the energy balance: simulate `metered(mechanism)`, then `energy_balance` (kinetic,
+  potential, dissipated energy and the residual); docs/tutorial.md shows all three;
 * identify, design and sweep: the modules `fit` (`fit.fit`, `fit.parameter_jacobian`),
   `optimize` (`optimize.optimize`, `optimize.DesignProblem`) and `sweep` (`sweep.sweep`,
   `sweep.load_sweep`). They are modules, not functions, because `jaxdeploy.fit`,
@@ -81,6 +86,10 @@ _EXPORTS = {
     "AppliedForce": "jaxdeploy.mechanism",
     "AppliedTorque": "jaxdeploy.mechanism",
     "consistent_state": "jaxdeploy.mechanism",
+    # outputs of a run beyond the saved states
+    "metered": "jaxdeploy.mechanism",
+    "energy_balance": "jaxdeploy.mechanism",
+    "clearance_joint_history": "jaxdeploy.analysis",
 }
 _MODULES = ("contact", "mechanism", "solvers", "scenes", "analysis", "fit", "optimize", "sweep")
 
@@ -110,12 +119,15 @@ __all__ = [  # = _EXPORTS + _MODULES + __version__ (tests/test_public_api.py che
     "Weld",
     "__version__",
     "analysis",
+    "clearance_joint_history",
     "consistent_state",
     "contact",
+    "energy_balance",
     "enable_caches",
     "fit",
     "get_scene",
     "mechanism",
+    "metered",
     "optimize",
     "scenes",
     "simulate",
@@ -143,6 +155,7 @@ def __dir__():
 if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
     from . import analysis, contact, fit, mechanism, optimize, scenes, solvers, sweep
     from ._compilation_cache import enable_caches
+    from .analysis import clearance_joint_history
     from .batch import simulate_batch
     from .mechanism import (
         AngleDriver,
@@ -161,6 +174,8 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
         Spring,
         Weld,
         consistent_state,
+        energy_balance,
+        metered,
     )
     from .scenes import SCENES, DeployArray, Impact, Pendulum, Scene, SliderCrank, get_scene
     from .simulation import Trajectory, simulate

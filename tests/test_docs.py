@@ -41,3 +41,29 @@ def test_deploy_array_page_batch_example_runs():
     # Both cases start at 45° and are opening.
     for a in alpha:
         assert abs(a[0] - np.pi / 4) < 1e-9 and a[-1] > a[0]
+
+
+@pytest.mark.slow  # ~85 s CPU at load ~28 (the fit's forward-mode model compiles for most of it)
+def test_tutorial_runs_and_its_numbers_hold(monkeypatch):
+    # The page turns the persistent caches on first; in this shared test process they stay off.
+    monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", "off")
+    namespace = {}
+    for block in _python_blocks("tutorial.md"):
+        exec(compile(block, "docs/tutorial.md", "exec"), namespace)
+    trajectory = namespace["trajectory"]
+    assert trajectory.ok, trajectory.status()
+    assert trajectory.control.solver_name() == "dopri8"  # the defaults ran
+    # Eight impacts (tests/test_independent_pendulum.py checks them against the reference).
+    assert len(namespace["episodes"]) == 8
+    # The journal reaches the bore (eccentricity = clearance + penetration, µm).
+    assert 1e-4 < namespace["eccentricity"].max() < 1e-4 + 2e-6
+    # The energy balance closes to the meter's trapezoidal error (measured 1.6e-5).
+    balance, scale = namespace["balance"], namespace["scale"]
+    assert float(np.max(np.abs(balance["residual"]))) / scale < 1e-4
+    assert float(balance["dissipated"][-1]) > 0
+    # The fit recovers c_e = 0.8 from 0.7 within two standard errors.
+    result = namespace["result"]
+    estimate, error = result.estimates["restitution"], result.standard_errors["restitution"]
+    assert result.converged and error < 0.05 and abs(estimate - 0.8) < 2 * error
+    # Forward-mode derivative against the central difference beside it.
+    np.testing.assert_allclose(float(namespace["slope"]), float(namespace["difference"]), rtol=1e-4)
