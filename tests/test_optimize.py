@@ -244,9 +244,23 @@ def test_optimize_command_end_to_end_on_a_short_deployment(tmp_path, capsys):
     assert record["scene_options"]["friction_roughness"] == "ploughing"
 
 
+# The objective below (log of panel 2's post-lock peak vibration + log of panel 1's deployment
+# deviation, 0.65 s) is ill-conditioned at round-off level: measured at 938a945 (load 25),
+# single runs with panel2_ra changed by 1e-15 relative (±1e-15, 1e-14) move it by up to
+# 8.7e-4 (ra 0.8 µm: -14.935758 ... -14.936632; 3.2 µm: -14.917504 ... -14.917920), i.e.
+# 5.9e-5 relative, the peak vibration alone by 1e-3 relative. A vmapped program rounds
+# differently from a single run (and a batch of one from a batch of two: -14.936761 against
+# -14.935876 for the same case), so batch and single runs agree to that floor, not to 1e-9
+# (measured batch - single: 1.2e-4 and 4.9e-4). Each case runs the same model and step
+# control; the bound is 2x the measured round-off spread. The two designs' objectives differ
+# by 0.018, 10x the bound, so a case given another case's parameters fails.
+BATCH_SINGLE_RTOL = 1.2e-4
+
+
 @pytest.mark.slow
 def test_design_problem_batch_equals_single_runs():
-    """evaluate_batch (one vmapped run) equals separate evaluations of the same designs."""
+    """evaluate_batch (one vmapped run) equals separate evaluations of the same designs, to
+    the objective's round-off conditioning (BATCH_SINGLE_RTOL)."""
     from jaxdeploy.objectives import parse_objective
     from jaxdeploy.optimize import DesignProblem, evaluate_batch
 
@@ -259,10 +273,12 @@ def test_design_problem_batch_equals_single_runs():
     cases = {"panel2_ra": [0.8e-6, 3.2e-6]}
     batch = evaluate_batch(problem, cases)
     assert list(batch["ok"]) == [True, True]
+    bound = BATCH_SINGLE_RTOL * abs(batch["objective"][0])
+    assert abs(batch["objective"][1] - batch["objective"][0]) > 5 * bound
     for i, ra in enumerate(cases["panel2_ra"]):
         value, parts, ok = problem.evaluate({"panel2_ra": ra})
         assert bool(ok)
-        assert batch["objective"][i] == pytest.approx(float(value), rel=1e-9)
+        assert batch["objective"][i] == pytest.approx(float(value), rel=BATCH_SINGLE_RTOL)
 
 
 def test_forward_mode_optimizes_a_loss_whose_runs_only_forward_mode_can_differentiate():
