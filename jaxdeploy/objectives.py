@@ -298,6 +298,12 @@ class Term:
             )
         if not math.isfinite(self.weight):
             raise ValueError(f"objective weight = {self.weight!r} is invalid: it must be finite")
+        # Checked here, not when the deployment is evaluated inside the compiled run.
+        if self.panel not in PANELS:
+            raise ValueError(
+                f"objective term {self.label!r}: panel {self.panel!r} is unknown; valid: "
+                + ", ".join(PANELS)
+            )
 
     @property
     def label(self) -> str:

@@ -125,7 +125,10 @@ class Trajectory(eqx.Module):
         """`"ok"` or a message with the time reached and the reason."""
         if self.ok:
             return "ok"
-        return f"failed after t = {self.time_reached():.6g} s: {dfx.RESULTS[self.result]}"
+        # A result taken out of a batch holds a NumPy scalar, which `RESULTS[...]` would call
+        # "unknown": as a 0-d array it gets the solver's message, as a single run does.
+        result = jax.tree.map(np.asarray, self.result)
+        return f"failed after t = {self.time_reached():.6g} s: {dfx.RESULTS[result]}"
 
 
 @dataclass(frozen=True)

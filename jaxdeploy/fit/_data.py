@@ -131,6 +131,11 @@ def _check(m: Measurements) -> None:
             )
 
 
+# Largest magnitude of a measured value: a sum of squares of values beyond it overflows a
+# float64 (sqrt(1.8e308) ≈ 1.3e154, with room for a sum over many samples).
+MAX_MAGNITUDE = 1e150
+
+
 def _check_finite(src, name, values):
     bad = ~np.isfinite(values)
     if np.any(bad):
@@ -138,6 +143,14 @@ def _check_finite(src, name, values):
         raise MeasurementError(
             f"{src}: column {name!r} row {row} holds {values[row]!r}; every value must be "
             "a finite number"
+        )
+    huge = np.abs(values) > MAX_MAGNITUDE
+    if np.any(huge):
+        row = int(np.argmax(huge))
+        raise MeasurementError(
+            f"{src}: column {name!r} row {row} holds {float(values[row])!r}, beyond "
+            f"±{MAX_MAGNITUDE:g}: its square overflows a float64 (a least-squares fit squares "
+            "every residual); give the values in SI units"
         )
 
 
