@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from ._compilation_cache import enable_compilation_cache, prefer_cacheable_errors
@@ -10,6 +11,7 @@ from ._compilation_cache import enable_compilation_cache, prefer_cacheable_error
 prefer_cacheable_errors()  # before any command module imports equinox
 
 from .commands import discover  # noqa: E402
+from .commands._args import EXIT_INTERRUPTED  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -26,7 +28,20 @@ def main(argv=None) -> int:
         # so that callers of `main` (tests, scripts) see it like any other refusal.
         return exit_.code
     enable_compilation_cache()
-    return runners[args.command](args)
+    try:
+        return runners[args.command](args)
+    except KeyboardInterrupt:
+        # One line, not a traceback; what a command finished is already on disk (files are
+        # written atomically, a sweep's chunks as they finish) and what it had not is removed
+        # on the way out (the staging folder of `jaxdeploy._output_folder`).
+        print(f"interrupted: jaxdeploy {args.command} stopped (Ctrl-C)", file=sys.stderr)
+        if argv is None:
+            # The program itself: end now, without the interpreter's shutdown, which can crash
+            # while XLA's threads are still compiling (a segfault instead of exit 130).
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(EXIT_INTERRUPTED)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

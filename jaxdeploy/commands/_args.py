@@ -25,10 +25,18 @@ SET_HELP = (
 )
 
 
+# Exit codes of every command (README.md, "Exit codes"); `fit` adds its verdicts 3-5.
+EXIT_OK = 0
+EXIT_FAILED = 1  # the solver failed (status names when and why), or the run raised
+EXIT_REFUSED = 2  # a refused command line: nothing written, nothing compiled
+EXIT_IMPLAUSIBLE = 6  # the run finished but failed a plausibility check (status names it)
+EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT, the shell's convention)
+
+
 def refuse(message: str) -> int:
-    """Print `error: message` to stderr; return 2, the exit code of a refused command line."""
+    """Print `error: message` to stderr; return `EXIT_REFUSED`."""
     print(f"error: {message}", file=sys.stderr)
-    return 2
+    return EXIT_REFUSED
 
 
 def number_in(

@@ -16,7 +16,12 @@ PANEL = r"panel\d+"
 SUMMARY_KEYS = (
     ("scene", "", "the scene's name"),
     ("t_end_s", "s", "end time of the run"),
-    ("status", "", '"ok", or when and why the integration stopped'),
+    (
+        "status",
+        "",
+        '"ok"; "failed after t = ...: why" when the solver stopped; "implausible: ..." naming '
+        "each failed plausibility check and its value",
+    ),
     ("t_reached_s", "s", "time the integration reached (t_end unless it failed)"),
     ("n_steps", "-", "accepted steps"),
     ("n_rejected", "-", "rejected steps (adaptive step control)"),
@@ -67,6 +72,12 @@ SUMMARY_KEYS = (
         "frequency of the largest peak of the panel's post-lock acceleration spectrum",
     ),
     ("ideal_reference_status", "", "status of the ideal-joint reference run"),
+    (
+        "plausibility",
+        "",
+        "each plausibility check of the run (check, value, limit, unit, subject, passed); "
+        "docs/robustness.md",
+    ),
 )
 
 
@@ -85,6 +96,13 @@ def run_quantities(trajectory) -> dict:
             else None
         ),
     }
+
+
+def failed_run_summary(quantities: dict) -> dict:
+    """The scene's summary `quantities` of a failed run: every value null (its states past
+    the failure are NaN, its extremes may be those of a diverging force), the keys kept so
+    that every run's summary has the same fields."""
+    return {key: None for key in quantities}
 
 
 def describe_key(key: str) -> tuple[str, str] | None:

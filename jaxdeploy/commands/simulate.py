@@ -12,6 +12,9 @@ import time
 import numpy as np
 
 from ._args import (
+    EXIT_FAILED,
+    EXIT_IMPLAUSIBLE,
+    EXIT_OK,
     SCENE_OPTION_HELP,
     SET_HELP,
     add_step_control,
@@ -134,39 +137,77 @@ def _duration(seconds: float) -> str:
 
 
 def run(args) -> int:
-    from ..io import check_output_dir, default_output_dir
+    """validate → build → plan → run and write; every refusal (exit 2) comes before the
+    output folder is taken and before the run is compiled: a bad run leaves nothing behind."""
     from ..mechanism import AssemblyError
+    from . import _plan
 
-    # Every refusal happens here, before the output folder is created and before the solver
-    # is compiled: a bad run leaves nothing behind.
-    scene_name = args.scene or DEFAULT_SCENE
     try:
-        scene = scene_of(scene_name, args)
-        _, params, control = scene_settings(scene, args)
+        scene, params, control, t_end = _validate(args)
     except ValueError as err:
         return refuse(str(err))
-    t_end = scene.default_t_end if args.t_end is None else args.t_end
-    problem = run_length_problem(scene, control, t_end, args.long_run)
-    if problem is not None:
-        return refuse(problem)
-    out = args.out or default_output_dir("simulate", scene_name)
-    try:
-        check_output_dir(out, args.overwrite)
-    except FileExistsError as err:
-        return refuse(str(err))
+    out = args.out or _default_out(args)
 
     from ._phases import Phases
 
     phases = Phases(quiet=args.quiet)
     try:
         with phases.phase(
-            "build", f"{scene_name}: build the mechanism, assemble the initial state"
+            "build", f"{scene.name}: build the mechanism, assemble the initial state"
         ):
             mechanism = scene.build(params)
+            # Plan before assembling: the assembly compiles its Newton iteration.
+            try:
+                _plan_run(args, scene, mechanism, control)
+            except ValueError as err:
+                return refuse(str(err))
             initial = scene.initial_state(params, mechanism)
     except (ValueError, AssemblyError) as err:
-        return refuse(f"scene {scene_name!r} with these parameters: {err}")
-    return _simulate(args, scene, params, control, t_end, mechanism, initial, out, phases)
+        return refuse(f"scene {scene.name!r} with these parameters: {err}")
+    try:
+        folder = _plan.claim_output(out, args.overwrite)
+    except FileExistsError as err:
+        return refuse(str(err))
+    with folder:
+        return _simulate(args, scene, params, control, t_end, mechanism, initial, folder, phases)
+
+
+def _validate(args):
+    """`(scene, params, control, t_end)` of the command line; a bad one raises `ValueError`."""
+    scene = scene_of(args.scene or DEFAULT_SCENE, args)
+    _, params, control = scene_settings(scene, args)
+    t_end = scene.default_t_end if args.t_end is None else args.t_end
+    problem = run_length_problem(scene, control, t_end, args.long_run)
+    if problem is not None:
+        raise ValueError(problem)
+    from ..io import check_output_dir
+
+    if args.out is not None:
+        try:
+            check_output_dir(args.out, args.overwrite)
+        except FileExistsError as err:
+            raise ValueError(str(err)) from None
+    return scene, params, control, t_end
+
+
+def _default_out(args) -> str:
+    from ..io import default_output_dir
+
+    return default_output_dir("simulate", args.scene or DEFAULT_SCENE)
+
+
+def _plan_run(args, scene, mechanism, control) -> None:
+    """Refuse (`ValueError`) what the built mechanism shows cannot work: tolerances too loose
+    for its clearances, outputs too large for the memory."""
+    from . import _plan
+
+    _plan.check_tolerances(mechanism, control)
+    with_reference = not args.no_reference and scene.ideal_counterpart() is not None
+    _plan.check_memory(
+        _plan.saved_state_bytes(mechanism, args.n_save, runs=2 if with_reference else 1),
+        f"--n-save = {args.n_save} saved states of {scene.name}",
+        "lower --n-save",
+    )
 
 
 def _reference(scene, params, ts, phases):
@@ -251,29 +292,17 @@ def _while_running(mechanism, trajectory, analysis_type) -> dict:
     return run_metadata()
 
 
-def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phases) -> int:
+def _simulate(args, scene, params, control, t_end, mechanism, initial, folder, phases) -> int:
     import jax.numpy as jnp
 
     from .. import _program_cache
     from ..analysis import analysis_class, episodes_csv
-    from ..io import (
-        atomic_write_bytes,
-        atomic_write_json,
-        atomic_write_npz,
-        prepare_output_dir,
-        strict_json,
-    )
+    from ..analysis.plausibility import plausibility_checks, verdict
+    from ..io import atomic_write_bytes, atomic_write_json, atomic_write_npz, strict_json
     from ..mechanism import RevoluteClearance
     from ..simulation import simulate
     from ..solvers.step_control import scene_default_choice
-    from ._results import run_quantities, units_of
-
-    prepare_output_dir(out, args.overwrite)
-    # summary.json is written last and marks a complete result; drop the old one first so a
-    # rerun that dies half-way cannot pass for a complete result.
-    stale_marker = os.path.join(out, "summary.json")
-    if os.path.exists(stale_marker):
-        os.unlink(stale_marker)
+    from ._results import failed_run_summary, run_quantities, units_of
 
     analysis_type = analysis_class(scene)
     beside = None
@@ -320,10 +349,16 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
         reference = beside.result(trajectory.ts)
         phases.add("reference_wait_s", time.time() - waited)
     analysis = analysis_type(scene, params, mechanism, trajectory, reference)
-    with phases.phase("outputs", "outputs: summary quantities, trajectory.npz"):
-        summary.update(analysis.summary())
+    with phases.phase("outputs", "outputs: summary quantities, plausibility, trajectory.npz"):
+        quantities = analysis.summary()
+        checks = plausibility_checks(mechanism, trajectory) if trajectory.ok else []
+        summary["status"] = verdict(trajectory, checks)
+        # A failed run's quantities past its failure are not numbers to report (NaN states,
+        # an extreme of a diverging force): null, with the status saying why.
+        summary.update(quantities if trajectory.ok else failed_run_summary(quantities))
+        summary["plausibility"] = [{"check": c.name, **c.to_json()} for c in checks]
         atomic_write_npz(
-            f"{out}/trajectory.npz",
+            folder.file("trajectory.npz"),
             t=trajectory.ts,
             q=trajectory.q,
             v=trajectory.v,
@@ -333,10 +368,11 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
         written = ["summary.json", "trajectory.npz"]
         if mechanism.find(RevoluteClearance):
             # One row per contact episode of each clearance joint, units in the header.
-            atomic_write_bytes(f"{out}/episodes.csv", episodes_csv(mechanism, trajectory).encode())
+            text = episodes_csv(mechanism, trajectory)
+            atomic_write_bytes(folder.file("episodes.csv"), text.encode())
             written.append("episodes.csv")
     with phases.phase("plots"):
-        figures = analysis.plot(out)
+        figures = [os.path.basename(f) for f in analysis.plot(folder.staging)]
     summary["phases"] = dict(phases.durations)
     summary["wall_time_s"] = phases.total()
     summary["units"] = units_of(summary)
@@ -346,19 +382,28 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, out, phas
     summary["seed"] = None
     summary["step_control"] = control.to_json()
     summary["versions"] = versions
-    atomic_write_json(f"{out}/summary.json", summary)
+    atomic_write_json(folder.file("summary.json"), summary)
+    folder.commit()
+    out = folder.shown
     if not args.quiet:
         shown = {
             k: v
             for k, v in summary.items()
-            if k not in ("params", "scene_options", "versions", "step_control")
+            if k not in ("params", "scene_options", "versions", "step_control", "plausibility")
         }
         print(strict_json(shown, indent=2))
         print(
             "wrote "
             + ", ".join(f"{out}/{name}" for name in written)
-            + "".join(f", {f}" for f in figures)
+            + "".join(f", {out}/{f}" for f in figures)
         )
-    if not trajectory.ok:
-        print(f"error: the run {trajectory.status()}", file=sys.stderr)
-    return 0 if trajectory.ok else 1
+    return _verdict_exit(summary["status"], trajectory)
+
+
+def _verdict_exit(status: str, trajectory) -> int:
+    """Exit code of a finished run: 0 ok, `EXIT_FAILED` when the solver failed,
+    `EXIT_IMPLAUSIBLE` when a plausibility check failed (the status names it)."""
+    if status == "ok":
+        return EXIT_OK
+    print(f"error: the run {status}", file=sys.stderr)
+    return EXIT_FAILED if not trajectory.ok else EXIT_IMPLAUSIBLE

@@ -1,0 +1,195 @@
+"""Whether a run that the solver finished is physically plausible: the checks every
+`jaxdeploy simulate` and every sweep case passes before its status may read "ok".
+
+A solver that finishes has only kept its own error estimate within the tolerances; with
+tolerances too loose for the scene, or parameters outside the contact law's range, it can
+finish with a journal sunk a metre into its bearing. Each check compares one quantity of the
+run with a limit the physics sets:
+
+* **penetration per clearance**: the largest penetration δ of each clearance joint against
+  its radial clearance c. The contact laws (`jaxdeploy.contact`) are point-contact laws: the
+  journal touches the bearing along a narrow arc. The journal overlaps the bearing where
+  e·cos φ > c, with e = c + δ, i.e. over the half-angle φ = arccos(c / (c + δ)): 60° at
+  δ = c, 70.5° at δ = 2c. For internal cylinders the effective radius is R* ≈ R_j²/c, and
+  with δ ≈ a²/R* the contact half-width is a ≈ R_j·sqrt(δ/c): Hertz's assumption a ≪ R_j
+  (Johnson 1985, Contact Mechanics, §4.1) already fails near δ ≈ c. The limit
+  δ ≤ `PENETRATION_PER_CLEARANCE` · c is a generous one that flags runs clearly past it (the
+  impact scene's default, a 1-D closed-form check with a given stiffness, reaches δ = 1.05 c).
+* **penetration per journal radius**: δ against the journal radius R_j. Hertz theory assumes
+  small strains, a contact zone small against the radii of the bodies (Johnson 1985,
+  Contact Mechanics, §4.1). Limit: δ ≤ `PENETRATION_PER_RADIUS` · R_j.
+* **constraint drift**: the largest |Φ(q)| of the ideal joints at the saved states. A drift
+  comparable to a clearance moves the joints as much as the clearance the run studies. Limit:
+  `DRIFT_PER_CLEARANCE` of the smallest clearance; in a mechanism without clearance joints
+  `DRIFT_LIMIT_M`.
+
+The limits are this package's rules (the literature gives ranges of validity, not sharp
+limits); docs/robustness.md lists them with their reasons.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+PENETRATION_PER_CLEARANCE = 2.0  # contact half-arc 70.5°, a ≈ 1.4 R_j
+PENETRATION_PER_RADIUS = 0.1
+DRIFT_PER_CLEARANCE = 0.01
+DRIFT_LIMIT_M = 1e-6
+# An absolute step tolerance above this part of the smallest clearance is refused up front.
+ATOL_PER_CLEARANCE = 0.01
+
+
+@dataclass(frozen=True)
+class Check:
+    """One plausibility check of a run: its `name`, the `value` measured, the `limit` it may
+    reach, its `unit`, and what was compared (`subject`)."""
+
+    name: str
+    value: float
+    limit: float
+    unit: str
+    subject: str
+
+    @property
+    def passed(self) -> bool:
+        # NaN fails: a quantity the run could not compute is no evidence of plausibility.
+        return bool(self.value <= self.limit)
+
+    def message(self) -> str:
+        unit = "" if self.unit == "-" else f" {self.unit}"
+        return (
+            f"{self.name} = {self.value:.3g}{unit} exceeds its limit {self.limit:.3g}{unit} "
+            f"({self.subject})"
+        )
+
+    def to_json(self) -> dict:
+        return {
+            "value": self.value,
+            "limit": self.limit,
+            "unit": self.unit,
+            "subject": self.subject,
+            "passed": self.passed,
+        }
+
+
+def clearance_joints(mechanism) -> list[tuple[int, object]]:
+    """`(element index, RevoluteClearance)` of every clearance joint of `mechanism`."""
+    from ..mechanism import RevoluteClearance
+
+    return [(i, mechanism.elements[i]) for i in mechanism.find(RevoluteClearance)]
+
+
+def smallest_clearance(mechanism) -> float | None:
+    """The smallest radial clearance [m] of `mechanism`'s clearance joints, or None."""
+    joints = clearance_joints(mechanism)
+    return min(float(j.clearance) for _, j in joints) if joints else None
+
+
+def _penetration_checks(mechanism, trajectory) -> list[Check]:
+    from .contact_forces import contact_extremes
+
+    extremes = contact_extremes(mechanism, trajectory)
+    checks = []
+    for index, joint in clearance_joints(mechanism):
+        delta = extremes[index]["max_penetration"]
+        c, radius = float(joint.clearance), float(joint.journal_radius)
+        where = f"clearance joint {index} ({joint.bearing_body}/{joint.journal_body})"
+        checks.append(
+            Check(
+                "penetration_per_clearance",
+                delta / c,
+                PENETRATION_PER_CLEARANCE,
+                "-",
+                f"{where}: largest penetration {delta:.3g} m in a clearance of {c:.3g} m",
+            )
+        )
+        checks.append(
+            Check(
+                "penetration_per_radius",
+                delta / radius,
+                PENETRATION_PER_RADIUS,
+                "-",
+                f"{where}: largest penetration {delta:.3g} m, journal radius {radius:.3g} m",
+            )
+        )
+    return checks
+
+
+def _drift_check(mechanism, trajectory) -> list[Check]:
+    if not mechanism.n_constraints:
+        return []
+    residual = np.asarray(_residuals(_traced_numbers(mechanism), trajectory.q, trajectory.ts))
+    drift = float(np.max(np.abs(residual))) if residual.size else 0.0
+    c = smallest_clearance(mechanism)
+    if c is None:
+        limit, subject = DRIFT_LIMIT_M, "largest |Φ(q)| of the saved states"
+    else:
+        limit = DRIFT_PER_CLEARANCE * c
+        subject = f"largest |Φ(q)| of the saved states, smallest clearance {c:.3g} m"
+    return [Check("constraint_drift", drift, limit, "m", subject)]
+
+
+def _traced_numbers(mechanism):
+    """`mechanism` with its Python numbers (parameters) as arrays: `_residuals` then compiles
+    once per mechanism structure, not once per parameter set (a sweep's cases)."""
+    import jax
+    import jax.numpy as jnp
+
+    def as_array(leaf):
+        if isinstance(leaf, int | float) and not isinstance(leaf, bool):
+            return jnp.asarray(leaf, dtype=float)
+        return leaf
+
+    return jax.tree.map(as_array, mechanism)
+
+
+@functools.cache
+def _residual_program():
+    import equinox as eqx
+    import jax
+
+    @eqx.filter_jit
+    def residuals(mechanism, q, ts):
+        return jax.vmap(mechanism.constraints)(q, ts)
+
+    return residuals
+
+
+def _residuals(mechanism, q, ts):
+    """Φ(q, t) of every saved state (one compiled program per mechanism structure)."""
+    return _residual_program()(mechanism, q, ts)
+
+
+def plausibility_checks(mechanism, trajectory) -> list[Check]:
+    """Every plausibility check of a finished run (module docstring), passed or not."""
+    return _penetration_checks(mechanism, trajectory) + _drift_check(mechanism, trajectory)
+
+
+def verdict(trajectory, checks) -> str:
+    """The run's status: the solver's own failure (`Trajectory.status`), else
+    `"implausible: ..."` naming every failed check and its value, else `"ok"`."""
+    if not trajectory.ok:
+        return trajectory.status()
+    failed = [c.message() for c in checks if not c.passed]
+    return "ok" if not failed else "implausible: " + "; ".join(failed)
+
+
+def tolerance_problem(mechanism, control) -> str | None:
+    """Why `control`'s tolerances are too loose to mean anything for `mechanism`, or None:
+    an absolute tolerance above `ATOL_PER_CLEARANCE` of the smallest clearance lets each step
+    err by that part of the gap the run resolves (positions are in m, and the error norm
+    takes them with atol)."""
+    c = smallest_clearance(mechanism)
+    atol = getattr(control, "atol", None)
+    if c is None or atol is None or not control.adaptive:
+        return None
+    if atol > ATOL_PER_CLEARANCE * c:
+        return (
+            f"--atol = {atol:g} is too loose for a clearance of {c:g} m: each step could err "
+            f"by more than {ATOL_PER_CLEARANCE:g} of the gap it resolves; give --atol ≤ "
+            f"{ATOL_PER_CLEARANCE * c:g}"
+        )
+    return None

@@ -1,0 +1,97 @@
+"""The planning stage every command shares, between validating its arguments and running:
+what the run will need (memory of its outputs), whether its tolerances can mean anything, and
+the output folder, locked for it (`jaxdeploy._output_folder`). Each check raises `ValueError`
+(a refusal, exit 2) with a message naming the estimate and the limit.
+
+Keep this module light (no JAX at import).
+"""
+
+from __future__ import annotations
+
+import os
+
+# Bytes of a float64.
+FLOAT_BYTES = 8
+# Copies of the saved states a run holds at once: the device buffer, its NumPy copy, the
+# analysis' histories over the saved states (contact quantities per joint, spectra) and the
+# compressed file's buffer. A round upper count: the estimate is for refusing runs that
+# cannot fit, not for sizing the machine.
+OUTPUT_COPIES = 4
+# Share of the memory available that a command may plan to use: the rest is the process
+# (JAX, the compiled programs) and whatever else runs on the machine.
+MEMORY_SHARE = 0.5
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to this process: `MemAvailable` of /proc/meminfo, or the
+    cgroup's limit less its usage when that is smaller; None when neither can be read."""
+    found = []
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    found.append(int(line.split()[1]) * 1024)
+    except (OSError, ValueError):
+        pass
+    try:
+        with open("/sys/fs/cgroup/memory.max") as fh:
+            limit = fh.read().strip()
+        with open("/sys/fs/cgroup/memory.current") as fh:
+            used = int(fh.read().strip())
+        if limit != "max":
+            found.append(int(limit) - used)
+    except (OSError, ValueError):
+        pass
+    return min(found) if found else None
+
+
+def size_text(n_bytes: float) -> str:
+    for unit, size in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n_bytes >= size:
+            return f"{n_bytes / size:.3g} {unit}"
+    return f"{n_bytes:.0f} B"
+
+
+def saved_state_bytes(mechanism, n_save: int, runs: int = 1) -> int:
+    """Bytes of the saved states of `runs` runs of `mechanism` with `n_save` saved times: q,
+    q̇, q̈ (n each) and λ (m) per saved time, float64, times `OUTPUT_COPIES`."""
+    per_state = 3 * mechanism.n_coordinates + mechanism.n_constraints + 1
+    return OUTPUT_COPIES * FLOAT_BYTES * per_state * int(n_save) * int(runs)
+
+
+def check_memory(n_bytes: int, what: str, remedy: str) -> None:
+    """Refuse (`ValueError`) a plan of `n_bytes` that would not fit in `MEMORY_SHARE` of the
+    memory available, naming `what` needs it, the estimate, the limit and the `remedy`."""
+    available = available_memory()
+    if available is None:
+        return
+    limit = MEMORY_SHARE * available
+    if n_bytes > limit:
+        raise ValueError(
+            f"{what} would need about {size_text(n_bytes)} of memory, more than the "
+            f"{size_text(limit)} a run may use ({MEMORY_SHARE:.0%} of the {size_text(available)} "
+            f"available); {remedy}"
+        )
+
+
+def check_tolerances(mechanism, control) -> None:
+    """Refuse (`ValueError`) step tolerances too loose to resolve the mechanism's clearances
+    (`analysis.plausibility.tolerance_problem`)."""
+    from ..analysis.plausibility import tolerance_problem
+
+    problem = tolerance_problem(mechanism, control)
+    if problem is not None:
+        raise ValueError(problem)
+
+
+def claim_output(out: str, overwrite: bool):
+    """The output folder `out`, locked for this run with a fresh staging folder to write into
+    (`_output_folder.OutputFolder`); raises `FileExistsError` with the user's message."""
+    from .._output_folder import OutputFolder
+
+    return OutputFolder(out, overwrite).claim()
+
+
+def shown_path(folder, name: str) -> str:
+    """Where file `name` of a committed result is, as the user named the folder."""
+    return os.path.join(folder.shown, name)
