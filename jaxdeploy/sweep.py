@@ -236,8 +236,9 @@ def sweep(
         manifest["definition"].setdefault("summary", False)
         if manifest["definition"] != definition:
             raise ValueError(
-                f"--resume: the sweep in {out_dir!r} was defined differently "
-                f"({manifest['definition']}); it cannot continue as {definition}"
+                f"--resume: the sweep in {out_dir!r} was defined differently: "
+                + "; ".join(_differences(manifest["definition"], definition))
+                + "; resume it with the same settings, or start a new sweep in another --out"
             )
     else:
         if os.path.isdir(out_dir) and os.listdir(out_dir):
@@ -334,6 +335,25 @@ def sweep(
     if bar is not None:
         bar.close()
     return manifest
+
+
+def _differences(old, new, where: str = "") -> list[str]:
+    """The fields (dotted paths) in which two sweep definitions differ, each with both
+    values: `grid.clearance: [0.0001, 0.0002] in the folder, [0.0001] now`."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        out = []
+        for key in list(old) + [k for k in new if k not in old]:
+            path = f"{where}.{key}" if where else str(key)
+            if key not in new:
+                out.append(f"{path}: {old[key]!r} in the folder, not set now")
+            elif key not in old:
+                out.append(f"{path}: not set in the folder, {new[key]!r} now")
+            else:
+                out += _differences(old[key], new[key], path)
+        return out
+    if old != new:
+        return [f"{where}: {old!r} in the folder, {new!r} now"]
+    return []
 
 
 def _wrap(evaluate):

@@ -152,7 +152,7 @@ def test_overview_axes_are_labelled_with_units(swept):
 
     out, _, _ = swept
     grid = {"length": LENGTHS, "initial_angle": ANGLES}
-    fig = overview_figure(Pendulum(), load_sweep(str(out)), list(grid), grid)
+    fig, _ = overview_figure(Pendulum(), load_sweep(str(out)), list(grid), grid)
     visible = [ax for ax in fig.axes if ax.get_visible()]
     assert len(visible) >= 4  # t_reached_s, n_steps, n_rejected, max_constraint_violation, ...
     for ax in visible:

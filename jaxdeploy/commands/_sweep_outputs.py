@@ -106,26 +106,37 @@ def write_features(out_dir: str, scene, data: dict, swept) -> list[str]:
     return [csv_path, json_path]
 
 
-def plot_overview(out_dir: str, scene, data: dict, swept, grid) -> str | None:
-    """Write `overview.png` (`overview_figure`); returns its path, or None when there is
-    nothing to plot."""
-    fig = overview_figure(scene, data, swept, grid)
+def plot_overview(out_dir: str, scene, data: dict, swept, grid) -> tuple[str | None, int]:
+    """Write `overview.png` (`overview_figure`); returns its path (None when there is nothing
+    to plot) and the number of cases left out of it (failed or implausible)."""
+    fig, left_out = overview_figure(scene, data, swept, grid)
     if fig is None:
-        return None
+        return None, left_out
     import matplotlib.pyplot as plt
 
     path = os.path.join(out_dir, "overview.png")
     atomic_savefig(fig, path, dpi=110)
     plt.close(fig)
-    return path
+    return path, left_out
+
+
+def plotted(rows: list[dict]) -> list[dict]:
+    """The rows an overview plots: cases whose status is "ok" (a failed case's numbers are
+    null, an implausible one's are numbers the physics does not allow). Rows without a
+    status (a sweep without summaries) are all plotted."""
+    return [r for r in rows if r.get("status", "ok") == "ok"]
 
 
 def overview_figure(scene, data: dict, swept, grid):
-    """Each numeric feature against the first swept parameter, one line per combination of
-    the others; axes labelled with units. None when no case finished."""
+    """`(figure, left_out)`: each numeric feature against the first swept parameter, one
+    line per combination of the others, axes labelled with units, of the cases `plotted`
+    (None when none is); `left_out` counts the others, and the title says so."""
     columns, units, rows = feature_table(scene, data, swept)
+    kept = plotted(rows)
+    left_out = len(rows) - len(kept)
+    rows = kept
     if not rows:
-        return None
+        return None, left_out
     import matplotlib
 
     matplotlib.use("Agg")
@@ -139,7 +150,7 @@ def overview_figure(scene, data: dict, swept, grid):
         and any(isinstance(r.get(c), int | float) for r in rows)
     ]
     if not numeric:
-        return None
+        return None, left_out
     x_name, others = swept[0], list(swept[1:])
     x = np.array([r[x_name] for r in rows], dtype=float)
     groups: dict[tuple, list[int]] = {}
@@ -170,6 +181,9 @@ def overview_figure(scene, data: dict, swept, grid):
         ax.set_visible(False)
     if others:
         axes.flat[0].legend(fontsize=6)
-    fig.suptitle(f"sweep of {scene.name}: {len(rows)} cases", fontsize=10)
+    title = f"sweep of {scene.name}: {len(rows)} cases"
+    if left_out:
+        title += f" ({left_out} failed or implausible, not shown: features.csv)"
+    fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    return fig
+    return fig, left_out

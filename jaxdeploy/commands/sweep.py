@@ -9,6 +9,9 @@ import os
 import sys
 
 from ._args import (
+    EXIT_FAILED,
+    EXIT_IMPLAUSIBLE,
+    EXIT_OK,
     OBJECTIVE_PRESETS,
     SCENE_OPTION_HELP,
     SET_HELP,
@@ -82,6 +85,12 @@ def add_arguments(parser) -> None:
         + "), stored per case (deploy_array; repeatable); default: none",
     )
     parser.add_argument("--no-trajectories", action="store_true", help="store no q, v")
+    parser.add_argument(
+        "--long-run",
+        action="store_true",
+        help="accept a sweep estimated to run longer than 15 min (as `simulate --long-run`; "
+        "default: such a sweep is refused with its estimate)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument(
         "--distributed", action="store_true", help="call jax.distributed.initialize() first"
@@ -117,8 +126,8 @@ def parse_values(name: str, text: str) -> list[float]:
         if len(parts) == 4:
             if not (low > 0 and high > 0):
                 raise bad("a log grid needs LOW, HIGH > 0")
-            return np.geomspace(low, high, n).tolist()
-        return np.linspace(low, high, n).tolist()
+            return _distinct(name, np.geomspace(low, high, n).tolist())
+        return _distinct(name, np.linspace(low, high, n).tolist())
     try:
         values = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
@@ -127,6 +136,19 @@ def parse_values(name: str, text: str) -> list[float]:
         raise bad("no values")
     if not all(math.isfinite(v) for v in values):
         raise bad("values must be finite")
+    return _distinct(name, values)
+
+
+def _distinct(name: str, values: list[float]) -> list[float]:
+    """`values`, refused (`ValueError`) when one appears twice: the same case would run twice
+    (and a range LOW:HIGH:N with LOW = HIGH and N > 1 is such a repetition too)."""
+    seen = set()
+    for v in values:
+        if v in seen:
+            raise ValueError(
+                f"--grid {name}: the value {v:g} is given twice; the same case would run twice"
+            )
+        seen.add(v)
     return values
 
 
@@ -167,6 +189,9 @@ def _distributed_from_environment() -> dict:
 
 
 def run(args) -> int:
+    """validate → plan (estimates, the folder's lock) → run → write; every refusal (exit 2)
+    comes before anything is written or compiled (the ideal reference of an --objective is a
+    simulation: it comes after the checks)."""
     import jax
 
     if args.distributed:
@@ -174,42 +199,158 @@ def run(args) -> int:
             jax.distributed.initialize(**_distributed_from_environment())
         except ValueError as err:
             return refuse(f"--distributed: {err}")
+    try:
+        plan = _validate(args)
+        _plan_resources(args, plan)
+    except ValueError as err:
+        return refuse(str(err))
+    from .._output_folder import FolderLock
 
+    try:
+        lock = FolderLock(plan.out).claim()
+    except FileExistsError as err:
+        return refuse(str(err))
+    with lock:
+        try:
+            manifest = _run(args, plan)
+        except (ValueError, FileExistsError) as err:
+            return refuse(str(err))
+        except RuntimeError as err:  # the objective's ideal reference run failed
+            print(f"error: {err}", file=sys.stderr)
+            return EXIT_FAILED
+        return _write(args, plan, manifest)
+
+
+class _Plan:
+    """What the command line asks for, checked: scene, fixed parameters, step control, grid,
+    policy, objective, end time and output folder."""
+
+    def __init__(self, **fields):
+        self.__dict__.update(fields)
+
+
+def _validate(args) -> _Plan:
+    """The sweep of the command line; a bad argument raises `ValueError` naming it."""
+    from ..sweep import DEFAULT_CHUNK_SIZE, DEFAULT_POLICY, grid_cases, parse_policy
+
+    if args.resume and args.out is None:
+        raise ValueError("--resume continues the sweep in --out: give --out")
+    if args.resume and not os.path.isfile(os.path.join(args.out, "manifest.json")):
+        raise ValueError(
+            f"--resume: {args.out!r} holds no sweep to continue (no manifest.json: it does not "
+            "exist, or its sweep stopped before finishing a chunk); leave out --resume to start it"
+        )
+    scene = scene_of(args.scene, args)
+    fixed, _, control = scene_settings(scene, args)
+    grid = parse_grid(args.grid, fixed)
+    cases = grid_cases(grid)
+    for row in zip(*cases.values(), strict=True):  # names and ranges of every case (cheap)
+        scene.resolve_params({**fixed, **dict(zip(cases, row, strict=True))})
+    check_used(scene, grid, "--grid")
+    policy = DEFAULT_POLICY if args.policy is None else args.policy
+    parse_policy(policy)
+    objective = None
+    if args.objective:
+        from ..objectives import parse_objective
+
+        objective = parse_objective(args.objective)
+    t_end = scene.default_t_end if args.t_end is None else args.t_end
+    if args.out is not None and not args.resume:
+        _check_fresh(args.out)
+    from ..io import default_output_dir
+
+    return _Plan(
+        scene=scene,
+        fixed=fixed,
+        control=control,
+        grid=grid,
+        n_cases=len(next(iter(cases.values()))),
+        policy=policy,
+        objective=objective,
+        t_end=t_end,
+        chunk_size=DEFAULT_CHUNK_SIZE if args.chunk_size is None else args.chunk_size,
+        out=args.out or default_output_dir("sweep", scene.name),
+    )
+
+
+def _check_fresh(out: str) -> None:
+    """Refuse (`ValueError`) a folder a new sweep cannot start in: one holding a sweep (it
+    needs --resume), one holding anything else, a file in the way, a read-only place."""
+    from ..io import check_output_dir
+
+    if os.path.isfile(os.path.join(out, "manifest.json")):
+        raise ValueError(
+            f"{out!r} already holds a sweep; pass --resume to continue it or choose another --out"
+        )
+    if os.path.isdir(out) and os.listdir(out):
+        raise ValueError(
+            f"output folder {out!r} is not empty and holds no sweep manifest; choose another --out"
+        )
+    try:
+        check_output_dir(out, overwrite=False)
+    except FileExistsError as err:
+        raise ValueError(str(err)) from None
+
+
+def _plan_resources(args, plan) -> None:
+    """Refuse (`ValueError`) a sweep whose step tolerances cannot resolve its clearances, whose
+    chunks or collected trajectories would not fit in memory, or that is estimated to run
+    longer than `simulate.LONG_RUN_S` without --long-run."""
+    from . import _plan
+
+    scene, grid = plan.scene, plan.grid
+    _check_duration(args, plan)
+    first = {k: v[0] for k, v in grid.items()}
+    # The smallest and largest value of each swept name (the others at their first): the
+    # tolerances must resolve the clearances of both ends (building compiles nothing).
+    for name, values in grid.items():
+        for value in {min(values), max(values)}:
+            params = scene.resolve_params({**plan.fixed, **first, name: value})
+            mechanism = scene.build(params)
+            _plan.check_tolerances(mechanism, plan.control)
+    chunk = min(plan.chunk_size, plan.n_cases)
+    collected = plan.n_cases if not args.no_trajectories else 0
+    _plan.check_memory(
+        _plan.saved_state_bytes(mechanism, args.n_save, runs=chunk + collected),
+        f"--n-save = {args.n_save} saved states of {chunk} cases per chunk"
+        + ("" if not collected else f" and the trajectories of all {collected} cases"),
+        "lower --n-save or --chunk-size, or pass --no-trajectories",
+    )
+
+
+def _check_duration(args, plan) -> None:
+    """Refuse (`ValueError`) a sweep estimated to run longer than `simulate.LONG_RUN_S`
+    without --long-run: `simulate`'s rate per simulated second of the scene, times the
+    cases, over the devices (an upper estimate: a vmapped chunk costs less per case)."""
+    from .simulate import INTEGRATE_S_PER_SIMULATED_S, LONG_RUN_S, _duration
+
+    scene = plan.scene
+    rate = INTEGRATE_S_PER_SIMULATED_S.get(scene.name)
+    if rate is not None and not args.long_run:
+        import jax
+
+        estimate = rate * plan.t_end * plan.n_cases / jax.device_count()
+        if estimate > LONG_RUN_S:
+            raise ValueError(
+                f"{plan.n_cases} cases of {scene.name} to --t-end = {plan.t_end:g} s would run "
+                f"for about {_duration(estimate)} (~{rate:g} s per simulated second and case on "
+                f"one core, {jax.device_count()} device(s)); pass --long-run to start it anyway"
+            )
+
+
+def _summarizer(plan):
+    """`summarize(params, trajectory)` of each case: what `jaxdeploy simulate` would report
+    for it (docs/results.md), with the same plausibility verdict in its status; a failed case
+    keeps its status and steps (null for the rest)."""
     import numpy as np
 
     from ..analysis import analysis_class
+    from ..analysis.plausibility import plausibility_checks, verdict
     from ..batch import reference_run
-    from ..io import default_output_dir
-    from ..sweep import DEFAULT_CHUNK_SIZE, DEFAULT_POLICY, grid_cases, parse_policy, sweep
     from . import _reference_cache
     from ._results import run_quantities
 
-    # Every refusal happens before anything is written or compiled (the ideal reference of an
-    # --objective is a simulation: it comes after the checks).
-    if args.resume and args.out is None:
-        return refuse("--resume continues the sweep in --out: give --out")
-    try:
-        scene = scene_of(args.scene, args)
-        fixed, _, control = scene_settings(scene, args)
-        grid = parse_grid(args.grid, fixed)
-        cases = grid_cases(grid)
-        rows = zip(*cases.values(), strict=True)
-        for row in rows:  # names and ranges of every case (cheap: no simulation)
-            scene.resolve_params({**fixed, **dict(zip(cases, row, strict=True))})
-        check_used(scene, grid, "--grid")
-        policy = DEFAULT_POLICY if args.policy is None else args.policy
-        parse_policy(policy)
-        objective = None
-        if args.objective:
-            from ..objectives import parse_objective
-
-            objective = parse_objective(args.objective)
-    except ValueError as err:
-        return refuse(str(err))
-    t_end = scene.default_t_end if args.t_end is None else args.t_end
-    out = args.out or default_output_dir("sweep", scene.name)
-    evaluate, features = None, None
-
+    scene = plan.scene
     analysis_type = analysis_class(scene)
     with_reference = analysis_type.uses_reference and scene.ideal_counterpart() is not None
 
@@ -225,70 +366,86 @@ def run(args) -> int:
         return run
 
     def summarize(params, trajectory):
-        # What `jaxdeploy simulate` would report for this case (docs/results.md).
         quantities = run_quantities(trajectory)
-        try:
-            reference = reference_for(params, trajectory)
-            mechanism = scene.build(params)
-            analysis = analysis_type(scene, params, mechanism, trajectory, reference)
-            quantities.update(analysis.summary())
-        except Exception:
-            # A failed case's states past the failure may be NaN and leave nothing to
-            # summarize: it keeps its status and steps (and null for the rest). A successful
-            # case whose summary fails is a bug: raise it.
-            if trajectory.ok:
-                raise
+        if not trajectory.ok:
+            # States past the failure are NaN and extremes may be those of a diverging
+            # force: nothing more to report than the status and the steps.
+            return quantities
+        reference = reference_for(params, trajectory)
+        mechanism = scene.build(params)
+        analysis = analysis_type(scene, params, mechanism, trajectory, reference)
+        quantities.update(analysis.summary())
+        quantities["status"] = verdict(trajectory, plausibility_checks(mechanism, trajectory))
         return quantities
 
-    try:
-        if objective is not None:
-            from ..optimize import DesignProblem
+    return summarize
 
-            problem = DesignProblem(
-                scene, objective, t_end, n_save=args.n_save, fixed=fixed, control=control
-            )
 
-            def evaluate(params, trajectory):
-                dep, _ = problem.deployment({k: params[k] for k in grid}, trajectory)
-                return {"objective": objective(dep), **objective.parts(dep)}
+def _run(args, plan) -> dict:
+    """Run (or resume) the sweep; returns its manifest."""
+    from ..sweep import sweep
 
-            features = ",".join(args.objective)
-        manifest = sweep(
-            scene,
-            grid,
-            out,
-            t_end=t_end,
+    evaluate, features = None, None
+    if plan.objective is not None:
+        from ..optimize import DesignProblem
+
+        problem = DesignProblem(
+            plan.scene,
+            plan.objective,
+            plan.t_end,
             n_save=args.n_save,
-            fixed=fixed,
-            control=control,
-            chunk_size=DEFAULT_CHUNK_SIZE if args.chunk_size is None else args.chunk_size,
-            policy=policy,
-            resume=args.resume,
-            evaluate=evaluate,
-            features=features,
-            summarize=summarize,
-            save_trajectories=not args.no_trajectories,
-            progress=not args.quiet,
+            fixed=plan.fixed,
+            control=plan.control,
         )
-    except (ValueError, FileExistsError) as err:
-        return refuse(str(err))
-    except RuntimeError as err:  # the objective's ideal reference run failed
-        print(f"error: {err}", file=sys.stderr)
-        return 1
+
+        def evaluate(params, trajectory):
+            dep, _ = problem.deployment({k: params[k] for k in plan.grid}, trajectory)
+            return {"objective": plan.objective(dep), **plan.objective.parts(dep)}
+
+        features = ",".join(args.objective)
+    return sweep(
+        plan.scene,
+        plan.grid,
+        plan.out,
+        t_end=plan.t_end,
+        n_save=args.n_save,
+        fixed=plan.fixed,
+        control=plan.control,
+        chunk_size=plan.chunk_size,
+        policy=plan.policy,
+        resume=args.resume,
+        evaluate=evaluate,
+        features=features,
+        summarize=_summarizer(plan),
+        save_trajectories=not args.no_trajectories,
+        progress=not args.quiet,
+    )
+
+
+def _write(args, plan, manifest) -> int:
+    """features.csv/json and overview.png of the finished cases; the report and exit code."""
+    import jax
+
+    out = plan.out
     failed = sum(c["failed"] for c in manifest["chunks"])
     done = sum(c["stop"] - c["start"] for c in manifest["chunks"])
     written = [os.path.join(out, "manifest.json")]
+    not_ok = 0
     if jax.process_index() == 0 and done:
         from ..sweep import load_sweep
         from ._sweep_outputs import plot_overview, write_features
 
         data = load_sweep(out)
-        written += write_features(out, scene, data, list(grid))
-        figure = plot_overview(out, scene, data, list(grid), grid)
+        written += write_features(out, plan.scene, data, list(plan.grid))
+        figure, not_ok = plot_overview(out, plan.scene, data, list(plan.grid), plan.grid)
         written += [] if figure is None else [figure]
+    implausible = max(not_ok - failed, 0)
     if not args.quiet:
         print(
             f"sweep: {done}/{manifest['n_cases']} cases in {len(manifest['chunks'])} chunks, "
-            f"{failed} failed; wrote " + ", ".join(written)
+            f"{failed} failed, {implausible} implausible (features.csv says why; left out of "
+            "overview.png); wrote " + ", ".join(written)
         )
-    return 0 if failed == 0 and done == manifest["n_cases"] else 1
+    if failed or done != manifest["n_cases"]:
+        return EXIT_FAILED
+    return EXIT_IMPLAUSIBLE if implausible else EXIT_OK
