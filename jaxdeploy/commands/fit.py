@@ -209,6 +209,13 @@ def _stages(args, data):
     from ..fit import ResidualSpec
 
     windows = _windows(args.window)
+    t = data.t
+    for t0, t1 in windows or ():
+        if not ((t >= t0) & (t <= t1)).any():
+            raise ValueError(
+                f"--window {t0:g}:{t1:g}: no data sample lies in it; the data cover "
+                f"[{float(t[0]):g}, {float(t[-1]):g}] s"
+            )
     block = args.block if args.loss == "block" else None
     width = args.width if args.loss == "smooth" else None
     widths = []
@@ -272,121 +279,151 @@ def _tolerance_line(tol) -> str:
 
 
 def run(args) -> int:
-    import os
-    import time
-
-    from ..fit import MeasurementError, fit, load_measurements, make_parameters, plot_fit
-    from ..io import (
-        atomic_write_bytes,
-        atomic_write_json,
-        atomic_write_npz,
-        check_output_dir,
-        default_output_dir,
-        prepare_output_dir,
-        run_metadata,
-    )
+    """validate → plan (the output folder's lock) → schedule (model tolerance, horizons) →
+    fit (and the refits the tolerance check asks for) → write → report. Every refusal comes
+    before the folder is taken and before anything is compiled."""
+    from ..fit import MeasurementError
+    from . import _plan
 
     try:
-        scene = scene_of(args.scene, args)
-    except ValueError as err:
-        return _fail(str(err))
-    try:
-        data = load_measurements(args.data)
-        if args.channels:
-            data = data.select([c.strip() for c in args.channels.split(",") if c.strip()])
-        if args.noise:
-            data = data.with_noise(_noise(args.noise, data.names))
-        _, fixed, control = scene_settings(scene, args)
-        params = make_parameters(scene, args.params, fixed)
-        stages = _stages(args, data)
+        job = _validate(args)
     except (MeasurementError, ValueError) as err:
         return _fail(str(err))
-    # Refusals happen before the folder is created and before anything is compiled.
     try:
-        out = args.out or default_output_dir("fit", scene.name)
-        check_output_dir(out, args.overwrite)
-    except (ValueError, FileExistsError) as err:
+        folder = _plan.claim_output(job.out, args.overwrite)
+    except FileExistsError as err:
         return _fail(str(err))
-
-    names = [p.name for p in params]
-    from ..fit import (
-        Comparison,
-        choose_tolerance,
-        impact_horizons,
-        onset_times,
-        refit_until_reproducible,
-        run_channels,
-        tolerance_check,
-    )
-
-    schedule = {}
-    auto_tolerance = args.dt is None and args.rtol is None
-    # The default continuation applies where the user chose none (no windows, no widths).
-    auto_horizons = args.horizons == "auto" and not args.window and not args.widths
-    if auto_tolerance or auto_horizons:
-        full = Comparison(data, stages[-1])
-        start = {**fixed, **{p.name: p.guess for p in params}}
-        if not args.quiet:
-            print("measuring the model's error at the start point...", file=sys.stderr)
+    with folder:
         try:
-            if auto_tolerance and full.noise_known:
-                control, record = choose_tolerance(scene, start, full, control)
-            else:
-                control, record = control, {}
-                record["trajectory"] = run_channels(scene, start, full.ts, full.names, control)[1]
+            _schedule(args, job)
+            result, refits, wall = _fit(args, job)
         except ValueError as err:
             return _fail(str(err))
         except RuntimeError as err:
             return _fail(str(err), EXIT_FAILED)
-        trajectory = record.pop("trajectory", None)
-        schedule["tolerance"] = record
-        if auto_horizons and trajectory is not None:
-            onsets = onset_times(trajectory)
-            horizons = impact_horizons(onsets, full.t_end, float(data.t[0]))
-            schedule["horizons"] = horizons
-            schedule["onsets_at_start"] = len(onsets)
-            if horizons:
-                args.horizons = horizons
-                stages = _stages(args, data)
-        if not args.quiet:
-            print(
-                f"model tolerance: rtol {control.rtol}, atol {control.atol}; "
-                f"horizons: {schedule.get('horizons') or 'whole record'}",
-                file=sys.stderr,
-            )
+        report, figures = _write(args, job, result, wall, folder)
+        folder.commit()
+    return _report(args, job, result, refits, report, figures)
+
+
+class _Job:
+    """A fit of the command line, checked: scene, data, fixed parameters, step control, the
+    parameters to fit, the residual stages, the output folder; `schedule` records what the
+    command chose on its own (tolerance, horizons)."""
+
+    def __init__(self, **fields):
+        self.schedule = {}
+        self.__dict__.update(fields)
+
+    @property
+    def names(self) -> list[str]:
+        return [p.name for p in self.params]
+
+
+def _validate(args) -> _Job:
+    """The fit of the command line; a bad argument raises `ValueError` or
+    `MeasurementError` naming it."""
+    from ..fit import load_measurements, make_parameters
+    from ..io import check_output_dir, default_output_dir
+
+    scene = scene_of(args.scene, args)
+    data = load_measurements(args.data)
+    if args.channels:
+        data = data.select([c.strip() for c in args.channels.split(",") if c.strip()])
+    if args.noise:
+        data = data.with_noise(_noise(args.noise, data.names))
+    _, fixed, control = scene_settings(scene, args)
+    params = make_parameters(scene, args.params, fixed)
+    stages = _stages(args, data)
+    out = args.out or default_output_dir("fit", scene.name)
+    try:
+        check_output_dir(out, args.overwrite)
+    except FileExistsError as err:
+        raise ValueError(str(err)) from None
+    return _Job(
+        scene=scene,
+        data=data,
+        fixed=fixed,
+        control=control,
+        params=params,
+        stages=stages,
+        out=out,
+        # The default continuation applies where the user chose none (no windows, widths).
+        auto_tolerance=args.dt is None and args.rtol is None,
+        auto_horizons=args.horizons == "auto" and not args.window and not args.widths,
+    )
+
+
+def _schedule(args, job) -> None:
+    """The model tolerance (`choose_tolerance`, when the user gave none) and the horizons of
+    the continuation (`impact_horizons`, from the impacts of the start point's run)."""
+    from ..fit import Comparison, choose_tolerance, impact_horizons, onset_times, run_channels
+
+    if not (job.auto_tolerance or job.auto_horizons):
+        return
+    full = Comparison(job.data, job.stages[-1])
+    start = {**job.fixed, **{p.name: p.guess for p in job.params}}
+    if not args.quiet:
+        print("measuring the model's error at the start point...", file=sys.stderr)
+    if job.auto_tolerance and full.noise_known:
+        job.control, record = choose_tolerance(job.scene, start, full, job.control)
+    else:
+        record = {}
+        record["trajectory"] = run_channels(job.scene, start, full.ts, full.names, job.control)[1]
+    trajectory = record.pop("trajectory", None)
+    job.schedule["tolerance"] = record
+    if job.auto_horizons and trajectory is not None:
+        onsets = onset_times(trajectory)
+        horizons = impact_horizons(onsets, full.t_end, float(job.data.t[0]))
+        job.schedule["horizons"] = horizons
+        job.schedule["onsets_at_start"] = len(onsets)
+        if horizons:
+            args.horizons = horizons
+            job.stages = _stages(args, job.data)
     if not args.quiet:
         print(
-            f"fitting {', '.join(names)} of {scene.name} to {', '.join(data.names)} "
-            f"({data.t.size} samples); compiling the model first...",
+            f"model tolerance: rtol {job.control.rtol}, atol {job.control.atol}; "
+            f"horizons: {job.schedule.get('horizons') or 'whole record'}",
+            file=sys.stderr,
+        )
+
+
+def _fit(args, job):
+    """`(result, refits, wall)`: the fit, refitted at tighter tolerances when the default
+    tolerance fails the check at the estimate (`refit_until_reproducible`)."""
+    import time
+
+    from ..fit import fit, refit_until_reproducible, tolerance_check
+
+    names = job.names
+    if not args.quiet:
+        print(
+            f"fitting {', '.join(names)} of {job.scene.name} to {', '.join(job.data.names)} "
+            f"({job.data.t.size} samples); compiling the model first...",
             file=sys.stderr,
             flush=True,
         )
     start_time = time.perf_counter()
-    try:
-        result = fit(
-            scene,
-            data,
-            params,
-            fixed=fixed,
-            residuals=stages,
-            control=control,
-            max_iterations=args.max_iterations,
-            starts=args.starts,
-            seed=args.seed,
-            callback=None if args.quiet else _progress(names),
-        )
-    except ValueError as err:
-        return _fail(str(err))
-    except RuntimeError as err:
-        return _fail(str(err), EXIT_FAILED)
-    tolerance_check(result, scene, fixed, control)
+    result = fit(
+        job.scene,
+        job.data,
+        job.params,
+        fixed=job.fixed,
+        residuals=job.stages,
+        control=job.control,
+        max_iterations=args.max_iterations,
+        starts=args.starts,
+        seed=args.seed,
+        callback=None if args.quiet else _progress(names),
+    )
+    tolerance_check(result, job.scene, job.fixed, job.control)
     refits = []
-    if auto_tolerance and result.reproducible is False:
+    if job.auto_tolerance and result.reproducible is False:
         # The default tolerance was chosen at the start point; at the estimate it is not
         # tight enough: refit from the estimate at 10x tighter until the check passes.
         if not args.quiet:
             print(_tolerance_line(result.tolerance), file=sys.stderr)
-        schedule["tolerance_check_before_refits"] = result.tolerance
+        job.schedule["tolerance_check_before_refits"] = result.tolerance
 
         def announce(record):
             if not args.quiet:
@@ -396,29 +433,35 @@ def run(args) -> int:
                       file=sys.stderr)  # fmt: skip
 
         try:
-            result, control, refits = refit_until_reproducible(
-                result, scene, data, fixed=fixed, control=control,
+            result, job.control, refits = refit_until_reproducible(
+                result, job.scene, job.data, fixed=job.fixed, control=job.control,
                 max_iterations=args.max_iterations,
                 callback=None if args.quiet else _progress(names), on_stage=announce,
             )  # fmt: skip
         except RuntimeError as err:
-            return _fail(f"refit at a tighter tolerance: {err}", EXIT_FAILED)
-        schedule["tolerance_refits"] = refits
-    wall = time.perf_counter() - start_time
-    prepare_output_dir(out, args.overwrite)
-    # fit.json is written last and marks a complete result: drop an old one first.
-    if os.path.exists(os.path.join(out, "fit.json")):
-        os.unlink(os.path.join(out, "fit.json"))
+            raise RuntimeError(f"refit at a tighter tolerance: {err}") from None
+        job.schedule["tolerance_refits"] = refits
+    return result, refits, time.perf_counter() - start_time
 
+
+def _write(args, job, result, wall, folder):
+    """fit.json, history.csv, fit.npz and the figures into the staging `folder`; returns
+    `(report, figure names)`."""
+    import os
+
+    from ..fit import plot_fit
+    from ..io import atomic_write_bytes, atomic_write_json, atomic_write_npz, run_metadata
+
+    names = job.names
     report = result.report()
     report.update(
-        scene=scene.name,
+        scene=job.scene.name,
         scene_options=parse_pairs(args.scene_option, "--scene-option"),
         data=args.data,
-        channels=list(data.names),
+        channels=list(job.data.names),
         noise_levels=result.comparison.sigma,
-        step_control=control.to_json(),
-        params={**fixed, **result.estimates},
+        step_control=job.control.to_json(),
+        params={**job.fixed, **result.estimates},
         seed=args.seed if args.starts else None,
         randomness=(
             f"--starts {args.starts}: Latin-hypercube start points drawn with --seed {args.seed}"
@@ -427,7 +470,7 @@ def run(args) -> int:
         ),
         command=sys.argv,
         wall_time_s=wall,
-        schedule=schedule,
+        schedule=job.schedule,
         versions=run_metadata(),
     )
     rows = ["stage,evaluation,cost,accepted,step," + ",".join(names)]
@@ -436,7 +479,7 @@ def run(args) -> int:
             f"{h['stage']},{h['iteration']},{h['cost']!r},{int(h['accepted'])},{h['step']!r},"
             + ",".join(repr(h["params"][n]) for n in names)
         )
-    atomic_write_bytes(f"{out}/history.csv", ("\n".join(rows) + "\n").encode())
+    atomic_write_bytes(folder.file("history.csv"), ("\n".join(rows) + "\n").encode())
     cmp_ = result.comparison
     first = result.comparison_initial
     arrays = {"t": cmp_.times, "t_initial": first.times}
@@ -444,11 +487,15 @@ def run(args) -> int:
         arrays[f"data_{n}"] = cmp_.data_features[n]
         arrays[f"initial_{n}"] = first.features_np(result.model_initial[n])
         arrays[f"fitted_{n}"] = cmp_.features_np(result.model_final[n])
-    atomic_write_npz(f"{out}/fit.npz", **arrays)
-    figures = plot_fit(result, out)
-    atomic_write_json(f"{out}/fit.json", report)
+    atomic_write_npz(folder.file("fit.npz"), **arrays)
+    figures = [os.path.basename(f) for f in plot_fit(result, folder.staging)]
+    atomic_write_json(folder.file("fit.json"), report)
+    return report, figures
 
-    # --quiet prints nothing; the exit code still tells ok / inadequate / not converged.
+
+def _report(args, job, result, refits, report, figures) -> int:
+    """Print the estimates and verdicts (nothing with --quiet); return the exit code."""
+    names, out = job.names, job.out
     say = print if not args.quiet else (lambda *args, **kwargs: None)
     width = max(len(n) for n in names)
     say(

@@ -225,20 +225,28 @@ def run(args) -> int:
         check_output_dir(out, args.overwrite)
     except (ValueError, FileExistsError) as err:
         return refuse(str(err))
+    from . import _plan
+
+    try:
+        folder = _plan.claim_output(out, args.overwrite)
+    except FileExistsError as err:
+        return refuse(str(err))
     if not args.quiet:
         for note in notes:
             print(f"note: {note}", file=sys.stderr)
     began = time.perf_counter()
-    return _optimize(args, scene, objective, bounds, fixed, x0, control, out, began)
+    with folder:
+        return _optimize(args, scene, objective, bounds, fixed, x0, control, folder, began)
 
 
-def _optimize(args, scene, objective, bounds, fixed, x0, control, out, began) -> int:
+def _optimize(args, scene, objective, bounds, fixed, x0, control, folder, began) -> int:
+    import os
     import time
 
     import diffrax as dfx
 
     from ..fit import gradient_mode
-    from ..io import atomic_write_json, prepare_output_dir, run_metadata
+    from ..io import atomic_write_json, run_metadata
     from ..optimize import BatchObjective, DesignProblem, Scatter, optimize
 
     pathwise = args.gradient == "pathwise" and not args.robust
@@ -328,9 +336,10 @@ def _optimize(args, scene, objective, bounds, fixed, x0, control, out, began) ->
         **result.to_json(),
         "versions": run_metadata(),
     }
-    prepare_output_dir(out, args.overwrite)
-    figure = _plot(result, scene, out)
-    atomic_write_json(f"{out}/result.json", record)
+    figure = os.path.basename(_plot(result, scene, folder.staging))
+    atomic_write_json(folder.file("result.json"), record)
+    folder.commit()
+    out = folder.shown
     if result.optimum is None:
         print(f"no successful iterate: {result.status}", file=sys.stderr)
     elif not args.quiet:
@@ -342,7 +351,7 @@ def _optimize(args, scene, objective, bounds, fixed, x0, control, out, began) ->
     if result.status != "ok":
         print(f"error: {result.status}", file=sys.stderr)
     if not args.quiet:
-        print(f"wrote {out}/result.json, {figure} (objective history)")
+        print(f"wrote {out}/result.json, {out}/{figure} (objective history)")
     return 0 if result.status == "ok" else 1
 
 
