@@ -1,0 +1,297 @@
+"""Hostile input (issue 30): every case asserts the exit code, that the message names the
+problem, and what is left on disk. Refusals happen before anything is compiled, so most cases
+cost little more than building a mechanism; the few that run a simulation use the shortest
+horizon that shows the behaviour."""
+
+import json
+import os
+import pathlib
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from jaxdeploy.cli import main
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+DATA = ROOT / "examples" / "slider_crank_slider_x.csv"
+
+
+def _run(capsys, *argv):
+    """`(exit code, stderr)` of `jaxdeploy ARGV` run in this process."""
+    code = main([str(a) for a in argv])
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return code, err
+
+
+def _entries(folder) -> list[str]:
+    """Everything in `folder`, hidden entries (locks, staging folders) included."""
+    return sorted(os.listdir(folder))
+
+
+# --- plausibility -----------------------------------------------------------------------
+
+
+def test_atol_too_loose_for_the_clearance_is_refused_before_any_work(tmp_path, capsys):
+    code, err = _run(capsys, "simulate", "slider_crank", "--atol", "1e5", "--out", tmp_path / "a")
+    assert code == 2
+    assert "--atol = 100000" in err and "clearance of 0.0005 m" in err
+    assert _entries(tmp_path) == []
+
+
+@settings(
+    max_examples=12,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+@given(atol=st.floats(min_value=5.1e-6, max_value=1e12))
+def test_any_atol_above_a_hundredth_of_the_clearance_is_refused(tmp_path, capsys, atol):
+    code, err = _run(
+        capsys, "simulate", "slider_crank", "--atol", repr(atol), "--out", tmp_path / "a"
+    )
+    assert code == 2 and "--atol" in err and "too loose" in err
+    assert _entries(tmp_path) == []
+
+
+def test_implausible_penetration_is_not_ok_and_exits_6(tmp_path, capsys):
+    # 10 m/s into a 0.1 mm clearance: the journal sinks 0.69 mm, 6.9 clearances (the 1-D Hertz
+    # impact δ = (5 m v² / 4K)^(2/5)); the contact is over within the horizon.
+    out = tmp_path / "run"
+    code = main(
+        ["simulate", "impact", "--set", "impact_speed=10", "--t-end", "1.5e-4", "--out", str(out)]
+    )
+    err = capsys.readouterr().err
+    assert code == 6
+    assert "implausible: penetration_per_clearance = 6.9 exceeds its limit 2" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"].startswith("implausible: penetration_per_clearance = 6.9")
+    failed = {c["check"] for c in summary["plausibility"] if not c["passed"]}
+    assert failed == {"penetration_per_clearance", "penetration_per_radius"}
+    assert _entries(tmp_path) == ["run"]
+
+
+def test_failed_run_writes_null_and_exits_1(tmp_path, capsys):
+    # Generalized-α with 0.5 s steps on a 1 s pendulum: Newton's iteration diverges.
+    out = tmp_path / "run"
+    code = main(["simulate", "pendulum", "--dt", "0.5", "--t-end", "2", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 1 and "Nonlinear solve diverged" in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"].startswith("failed after t = ")
+    assert summary["max_constraint_violation"] is None  # not the NaN states' number
+    assert summary["plausibility"] == []
+
+
+def test_a_case_taken_out_of_a_batch_names_its_failure_like_simulate():
+    import diffrax as dfx
+    import jax
+    import jax.numpy as jnp
+
+    from jaxdeploy.simulation import Trajectory
+
+    results = jax.vmap(
+        lambda ok: dfx.RESULTS.where(ok, dfx.RESULTS.successful, dfx.RESULTS.nonfinite)
+    )(jnp.array([True, False]))
+    case = jax.tree.map(lambda leaf: np.asarray(leaf)[1], results)
+    zeros = np.zeros((2, 1))
+    trajectory = Trajectory(
+        np.array([0.0, 1.0]), zeros, zeros, zeros, zeros, (), case, {}, t_reached=0.5
+    )
+    assert trajectory.status() == (
+        "failed after t = 0.5 s: Nonfinite (inf or nan) values detected during solve."
+    )
+
+
+def test_overview_leaves_out_failed_and_implausible_cases_and_says_so():
+    from jaxdeploy.commands._sweep_outputs import overview_figure
+    from jaxdeploy.scenes import Pendulum
+
+    statuses = ["ok", "failed after t = 0.1 s: non-finite", "implausible: x", "ok"]
+    data = {
+        "case": np.arange(4),
+        "param_length": np.array([1.0, 2.0, 3.0, 4.0]),
+        "summary": np.array(
+            [json.dumps({"status": s, "n_steps": 10 * (i + 1)}) for i, s in enumerate(statuses)]
+        ),
+    }
+    grid = {"length": [1.0, 2.0, 3.0, 4.0]}
+    fig, left_out = overview_figure(Pendulum(), data, ["length"], grid)
+    assert left_out == 2
+    assert "2 cases (2 failed or implausible, not shown" in fig._suptitle.get_text()
+    (line,) = fig.axes[0].lines
+    assert list(line.get_xdata()) == [1.0, 4.0]
+
+
+# --- resources ----------------------------------------------------------------------------
+
+
+def test_outputs_that_do_not_fit_in_memory_are_refused(tmp_path, capsys, monkeypatch):
+    from jaxdeploy.commands import _plan
+
+    monkeypatch.setattr(_plan, "available_memory", lambda: 24e9)
+    code, err = _run(
+        capsys, "simulate", "slider_crank", "--n-save", "100000000", "--out", tmp_path / "a"
+    )
+    assert code == 2
+    assert "--n-save = 100000000" in err and "112 GB" in err and "12 GB a run may use" in err
+    assert _entries(tmp_path) == []
+
+
+def test_a_sweep_of_hours_needs_long_run(tmp_path, capsys):
+    code, err = _run(
+        capsys,
+        "sweep",
+        "--scene",
+        "deploy_array",
+        "--grid",
+        "panel1_clearance=1e-5:1e-4:10000",
+        "--out",
+        tmp_path / "s",
+    )
+    assert code == 2 and "10000 cases" in err and "--long-run" in err
+    assert _entries(tmp_path) == []
+
+
+# --- a result folder belongs to one run ---------------------------------------------------
+
+
+def test_a_second_run_into_a_held_folder_is_refused_naming_the_holder(tmp_path, capsys):
+    from jaxdeploy._output_folder import OutputFolder
+
+    out = tmp_path / "held"
+    with OutputFolder(str(out)).claim():
+        code, err = _run(capsys, "simulate", "pendulum", "--out", out, "--overwrite")
+        assert code == 2 and "is in use by another run" in err and f"process {os.getpid()}" in err
+        code, err = _run(capsys, "sweep", "--scene", "pendulum", "--grid", "length=1,2",
+                         "--out", out)  # fmt: skip
+        assert code == 2 and "is in use by another run" in err
+    assert _entries(tmp_path) == []  # the holder's staging folder and lock are gone
+
+
+def test_overwrite_replaces_the_whole_folder_and_a_crash_leaves_the_old_one(
+    tmp_path, capsys, monkeypatch
+):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "slider_crank_plot.png").write_bytes(b"an older run's figure")
+    (out / "summary.json").write_text("{}")
+    argv = ["simulate", "pendulum", "--t-end", "0.05", "--n-save", "11", "--out", str(out)]
+    assert main([*argv, "--overwrite", "--quiet"]) == 0
+    assert _entries(out) == ["summary.json", "trajectory.npz"]
+    assert _entries(tmp_path) == ["run"]
+    first = (out / "summary.json").read_text()
+
+    import jaxdeploy.io
+
+    def disk_full(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(jaxdeploy.io, "atomic_write_npz", disk_full)
+    with pytest.raises(OSError, match="No space left"):
+        main([*argv, "--overwrite", "--quiet", "--t-end", "0.04"])
+    # The complete older result is intact; nothing half-written beside it.
+    assert (out / "summary.json").read_text() == first
+    assert _entries(tmp_path) == ["run"]
+
+
+@pytest.mark.parametrize("out", ["/proc/x", "/proc/self"])
+def test_an_output_folder_that_cannot_be_written_is_refused_before_the_run(out, capsys):
+    code, err = _run(capsys, "simulate", "pendulum", "--out", out, "--overwrite")
+    assert code == 2 and repr(out) in err
+    assert not os.path.exists("/proc/x")
+
+
+# --- interrupts and tracebacks ------------------------------------------------------------
+
+
+def test_ctrl_c_is_one_line_exit_130_and_leaves_nothing(tmp_path, capsys, monkeypatch):
+    import jaxdeploy.simulation
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(jaxdeploy.simulation, "simulate", interrupted)
+    code, err = _run(capsys, "simulate", "pendulum", "--out", tmp_path / "run")
+    assert code == 130
+    assert err.strip().splitlines()[-1] == "interrupted: jaxdeploy simulate stopped (Ctrl-C)"
+    assert _entries(tmp_path) == []
+
+
+def test_optimize_refuses_an_unknown_panel_before_compiling(tmp_path, capsys):
+    code, err = _run(
+        capsys,
+        "optimize",
+        "--scene",
+        "deploy_array",
+        "--objective",
+        "panel3:peak_vibration=1",
+        "--out",
+        tmp_path / "o",
+    )
+    assert code == 2 and "panel 'panel3' is unknown; valid: panel1, panel2" in err
+    assert _entries(tmp_path) == []
+
+
+def test_fit_refuses_a_window_outside_the_data(tmp_path, capsys):
+    code, err = _run(capsys, "fit", DATA, "--scene", "slider_crank", "--params",
+                     "clearance=6e-4", "--window", "5:6", "--out", tmp_path / "f")  # fmt: skip
+    assert code == 2 and "--window 5:6: no data sample lies in it" in err and "0.004" in err
+    assert _entries(tmp_path) == []
+
+
+def test_fit_refuses_a_value_whose_square_overflows_naming_the_row(tmp_path, capsys):
+    lines = DATA.read_text().splitlines()
+    first = next(i for i, line in enumerate(lines) if line[:1].isdigit())
+    lines[first + 3] = lines[first + 3].split(",")[0] + ",1e300"
+    data = tmp_path / "data.csv"
+    data.write_text("\n".join(lines) + "\n")
+    code, err = _run(capsys, "fit", data, "--scene", "slider_crank", "--params",
+                     "clearance=6e-4", "--out", tmp_path / "f")  # fmt: skip
+    assert code == 2 and "column 'slider_x' row 3 holds 1e+300" in err
+    assert _entries(tmp_path) == ["data.csv"]
+
+
+# --- sweeps -------------------------------------------------------------------------------
+
+
+def test_resume_of_a_folder_without_a_sweep_is_refused(tmp_path, capsys):
+    code, err = _run(capsys, "sweep", "--scene", "pendulum", "--grid", "length=1,2",
+                     "--out", tmp_path / "none", "--resume")  # fmt: skip
+    assert code == 2 and "--resume" in err and "holds no sweep to continue" in err
+    assert _entries(tmp_path) == []
+
+
+@pytest.mark.parametrize("values", ["1,2,1", "1:1:3", "1,1.0"])
+def test_a_grid_value_given_twice_is_refused(values, tmp_path, capsys):
+    code, err = _run(capsys, "sweep", "--scene", "pendulum", "--grid", f"length={values}",
+                     "--out", tmp_path / "s")  # fmt: skip
+    assert code == 2 and "--grid length: the value 1 is given twice" in err
+    assert _entries(tmp_path) == []
+
+
+def test_resume_on_another_grid_names_the_differing_field(tmp_path, capsys):
+    import jax
+
+    from jaxdeploy.batch import step_control
+    from jaxdeploy.scenes import Pendulum
+    from jaxdeploy.sweep import _definition, chunk_shape, parse_policy
+
+    scene = Pendulum()
+    grid = {"length": [1.0, 2.0]}
+    chunk = chunk_shape(64, 2, jax.device_count())
+    definition = _definition(
+        scene, grid, {}, 0.5, 21, step_control(scene, None), chunk, None, parse_policy("all")
+    )
+    definition["summary"] = True
+    out = tmp_path / "s"
+    out.mkdir()
+    manifest = {"definition": definition, "n_cases": 2, "chunks": []}
+    (out / "manifest.json").write_text(json.dumps(manifest))
+    code, err = _run(capsys, "sweep", "--scene", "pendulum", "--grid", "length=1,3",
+                     "--t-end", "0.5", "--n-save", "21", "--out", out, "--resume")  # fmt: skip
+    assert code == 2
+    assert "grid.length: [1.0, 2.0] in the folder, [1.0, 3.0] now" in err
+    assert "t_end" not in err and len(err) < 400  # the differing field, not the dictionary
+    assert _entries(out) == ["manifest.json"]
