@@ -218,12 +218,14 @@ def call(fn, *args):
     cache_key = None if where is None else key(fn, args)
     if cache_key is None:
         return fn(*args)
+    if not _safe(where):
+        return fn(*args)
     path = os.path.join(where, f"{cache_key}.jaxexport")
     # Read once per process: the same `Exported` object reuses its compiled executable, where
     # a new one read from the disk would be compiled again (a fit or a sweep calls again).
-    entry = _loaded.get(cache_key) or _load(path)
+    entry = _loaded.get(cache_key) or _load(path, cache_key)
     if entry is None:
-        payload = None if cache_key in _unexportable else _export(fn, args)
+        payload = None if cache_key in _unexportable else _export(fn, args, cache_key)
         if payload is None:
             _unexportable.add(cache_key)  # not tried again in this process
             return fn(*args)
@@ -335,7 +337,7 @@ class _ArrayMark:
 _ARRAY = _ArrayMark()
 
 
-def _export(fn, args) -> bytes | None:
+def _export(fn, args, cache_key: str) -> bytes | None:
     """The store's entry for `fn(*args)`: its exported program and its output with the arrays
     marked, serialized; None when JAX cannot export or serialize it (then the caller runs
     `fn` as it is, which raises again if the error was the traced code's own)."""
@@ -365,7 +367,11 @@ def _export(fn, args) -> bytes | None:
     flat.__name__ = flat.__qualname__ = "exported_" + getattr(fn, "__name__", "program")
     try:
         exported = jax.export.export(jax.jit(flat))(*shapes)
-        return pickle.dumps({"program": bytes(exported.serialize()), **output})
+        program = bytes(exported.serialize())
+        # What the entry is for (its key) and a digest of the program: `_load` checks both,
+        # so a file under another key or a damaged one is discarded, never run.
+        record = {"key": cache_key, "digest": hashlib.sha256(program).hexdigest()}
+        return pickle.dumps({"program": program, **record, **output})
     except Exception as err:  # noqa: BLE001
         # e.g. a host callback (a progress bar, equinox's checks under EQX_ON_ERROR=raise).
         warnings.warn(
@@ -377,22 +383,42 @@ def _export(fn, args) -> bytes | None:
         return None
 
 
-def _decode(payload: bytes):
+class EntryMismatch(ValueError):
+    """A program cache entry that is not what its name says (another key, a wrong digest)."""
+
+
+def _decode(payload: bytes, cache_key: str | None = None):
+    """`(exported, skeleton)` of a stored entry; with `cache_key`, an entry recorded for
+    another key or whose program does not match its digest raises `EntryMismatch`."""
     import jax
 
     stored = pickle.loads(payload)
+    if cache_key is not None:
+        if stored.get("key") != cache_key:
+            raise EntryMismatch("it was written for another program (its recorded key differs)")
+        if hashlib.sha256(stored["program"]).hexdigest() != stored.get("digest"):
+            raise EntryMismatch("its program does not match its digest")
     return jax.export.deserialize(bytearray(stored["program"])), stored["skeleton"]
 
 
-def _load(path):
-    """The entry at `path` decoded, or None when there is none or it cannot be read."""
+def _load(path, cache_key: str | None = None):
+    """The entry at `path` decoded (and checked against `cache_key`), or None when there is
+    none or it cannot be used: then it is traced again and the entry rewritten."""
     try:
         with open(path, "rb") as f:
             payload = f.read()
     except OSError:
         return None
     try:
-        return _decode(payload)
+        return _decode(payload, cache_key)
+    except EntryMismatch as err:
+        warnings.warn(
+            f"program cache: discarding the entry {path}: {err}; tracing the program again "
+            "and rewriting it (if this recurs, delete the folder)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return None
     except Exception as err:  # noqa: BLE001 - any unreadable entry is traced again
         warnings.warn(
             f"ignoring the unreadable program cache entry {path} ({type(err).__name__}: "
@@ -401,6 +427,32 @@ def _load(path):
             stacklevel=3,
         )
         return None
+
+
+_unsafe_seen: set[str] = set()
+
+
+def _safe(where: str) -> bool:
+    """Whether the store's folder may be read: entries are pickles, so a folder another user
+    could write into (owned by someone else, or group/other-writable) is not read (a missing
+    folder is safe: `_store` creates it private to its user's umask)."""
+    try:
+        info = os.stat(where)
+    except OSError:
+        return True
+    owner_ok = not hasattr(os, "getuid") or info.st_uid == os.getuid()
+    if owner_ok and not info.st_mode & 0o022:
+        return True
+    if where not in _unsafe_seen:
+        _unsafe_seen.add(where)
+        warnings.warn(
+            f"program cache: not reading {where}: it is writable by other users (mode "
+            f"{info.st_mode & 0o777:o}, owner uid {info.st_uid}) and its entries are pickles; "
+            f"run `chmod go-w {where}` or choose another JAXDEPLOY_CACHE_DIR",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    return False
 
 
 def _store(path: str, payload: bytes) -> None:

@@ -156,6 +156,37 @@ def test_the_compiled_program_is_kept_and_a_damaged_one_compiled_again(store):
     assert _program_cache._load_executable(str(executable)) is not None  # written again
 
 
+def test_a_valid_entry_under_another_key_is_discarded_and_rewritten(store):
+    """A valid entry of another program under this key's name (issue 30: every later run
+    failed, blaming the user's parameters) is discarded with a warning naming the cache and
+    the remedy, and the right program is traced and written in its place."""
+    x = jnp.linspace(0.0, 1.0, 5)
+    _program_cache.call(_toy, x, 1.5, 3)
+    _program_cache.call(_toy, x, 2.0, 2)
+    wanted = store / f"{_program_cache.key(_toy, (x, 1.5, 3))}.jaxexport"
+    (other,) = [p for p in store.glob("*.jaxexport") if p != wanted]
+    wanted.write_bytes(other.read_bytes())
+    _program_cache._loaded.clear()  # as in a new process
+    _program_cache._compiled.clear()
+    with pytest.warns(RuntimeWarning, match="program cache: discarding .* another program"):
+        out = _program_cache.call(_toy, x, 1.5, 3)
+    np.testing.assert_array_equal(np.asarray(out["y"]), np.asarray(_toy(x, 1.5, 3)["y"]))
+    assert _program_cache._load(str(wanted), _program_cache.key(_toy, (x, 1.5, 3))) is not None
+
+
+def test_a_folder_other_users_can_write_is_not_read(store, monkeypatch):
+    monkeypatch.setattr(_program_cache, "_unsafe_seen", set())
+    x = jnp.linspace(0.0, 1.0, 5)
+    _program_cache.call(_toy, x, 1.5, 3)
+    os.chmod(store, 0o777)
+    _program_cache._loaded.clear()
+    _program_cache._compiled.clear()
+    with pytest.warns(RuntimeWarning, match="not reading .* writable by other users"):
+        out = _program_cache.call(_toy, x, 1.5, 3)
+    np.testing.assert_array_equal(np.asarray(out["y"]), np.asarray(_toy(x, 1.5, 3)["y"]))
+    assert not _program_cache._loaded  # ran as the function itself
+
+
 def test_the_command_line_puts_it_beside_the_compilation_cache(tmp_path, monkeypatch):
     from jaxdeploy import _compilation_cache
 
