@@ -3,6 +3,8 @@ changes with whatever the reference depends on (and not with the clearance joint
 parameters), a failed reference is never stored, and the cache is off with the compilation
 cache."""
 
+import os
+
 import numpy as np
 
 from jaxdeploy.commands import _reference_cache as cache
@@ -68,3 +70,33 @@ def test_failed_reference_is_not_stored_and_cache_off_stores_nothing(tmp_path, m
     assert cache.folder() is None
     cache.store(key, _Run(), {})
     assert cache.load(key) is None
+
+
+def test_an_edited_or_misplaced_reference_is_discarded_and_computed_again(
+    tmp_path, monkeypatch, capsys
+):
+    """Issue 30: a stored reference whose numbers were edited was used without a warning (the
+    headline deviations moved from 66 µm to 1056 µm). It records its key and a digest of its
+    arrays; an entry that does not match is discarded with one line naming the cache."""
+    monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", str(tmp_path / "xla"))
+    scene = DeployArray()
+    params = scene.resolve_params()
+    run = _Run()
+    key = cache.key(scene, params, run.ts, scene.default_control)
+    cache.store(key, run, {"lock_time": 0.5})
+    path = tmp_path / "xla-references" / f"{key}.npz"
+    with np.load(path) as data:
+        stored = {k: data[k] for k in data.files}
+    np.savez(path, **{**stored, "q": stored["q"] * 16})  # the numbers edited
+    assert cache.load(key) is None
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "reference cache: discarding" in err and "digest" in err
+    assert not path.exists()  # gone: the next run computes and stores it again
+
+    other = cache.key(scene, {**params, "latch_stiffness": 1.0}, run.ts, scene.default_control)
+    cache.store(other, run, {})
+    os.replace(tmp_path / "xla-references" / f"{other}.npz", path)  # under the wrong key
+    assert cache.load(key) is None
+    assert "records another reference run's key" in capsys.readouterr().err
+    cache.store(key, run, {})
+    assert cache.load(key) is not None

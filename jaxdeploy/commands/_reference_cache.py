@@ -114,18 +114,56 @@ def reference_events(scene, params, run) -> dict:
     return {k: float(v) for k, v in ideal.events(mechanism, run).items()}
 
 
+ARRAYS = ("ts", "q", "v", "qdd", "lam")
+
+
+def digest(arrays, events_text: str = "") -> str:
+    """SHA-256 of the reference's arrays (shapes, dtypes and bytes, in `ARRAYS` order) and
+    of its events (as stored, JSON text)."""
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.shape}{a.dtype}".encode())
+        h.update(a.tobytes())
+    h.update(events_text.encode())
+    return h.hexdigest()
+
+
 def load(cache_key: str) -> StoredRun | None:
+    """The stored reference of `cache_key`, or None: none stored, or an entry that cannot be
+    read, records another key or whose arrays do not match their digest (an edited file);
+    such an entry is discarded with one line on stderr, computed again and rewritten."""
     where = folder()
     path = None if where is None else os.path.join(where, f"{cache_key}.npz")
     if path is None or not os.path.exists(path):
         return None
     try:
         with np.load(path) as data:
-            arrays = [data[k] for k in ("ts", "q", "v", "qdd", "lam")]
-            events = json.loads(str(data["events"]))
-            return StoredRun(*arrays, str(data["status"]), events)
-    except (OSError, KeyError, ValueError):
-        return None  # unreadable: compute it again
+            arrays = [data[k] for k in ARRAYS]
+            events_text = str(data["events"])
+            recorded = (str(data["key"]), str(data["digest"]), str(data["status"]))
+    except (OSError, KeyError, ValueError) as err:
+        return _discard(path, f"it cannot be read ({type(err).__name__})")
+    if recorded[0] != cache_key:
+        return _discard(path, "it records another reference run's key")
+    if recorded[1] != digest(arrays, events_text):
+        return _discard(path, "its numbers do not match their digest (the file was changed)")
+    return StoredRun(*arrays, recorded[2], json.loads(events_text))
+
+
+def _discard(path: str, why: str) -> None:
+    import sys
+
+    print(
+        f"warning: reference cache: discarding {path}: {why}; computing the reference again "
+        "(if this recurs, delete the folder)",
+        file=sys.stderr,
+    )
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+    return None
 
 
 def store(cache_key: str, run, events: dict) -> None:
@@ -136,6 +174,7 @@ def store(cache_key: str, run, events: dict) -> None:
     where = folder()
     if where is None or not run.ok:
         return
+    events_text = json.dumps(events)
     try:
         os.makedirs(where, exist_ok=True)
         atomic_write_npz(
@@ -147,7 +186,9 @@ def store(cache_key: str, run, events: dict) -> None:
             lam=run.lam,
             status=np.array(run.status()),
             # NaN (an event not reached) as JSON's NaN token, read back by json.loads.
-            events=np.array(json.dumps(events)),
+            events=np.array(events_text),
+            key=np.array(cache_key),
+            digest=np.array(digest([np.asarray(getattr(run, k)) for k in ARRAYS], events_text)),
         )
     except OSError:
         pass
