@@ -80,6 +80,7 @@ def _enable(folder: str) -> str | None:
     except OSError:
         return None
     jax.config.update("jax_compilation_cache_dir", folder)
+    _heal_damaged_entries()
     # JAX stores only programs that took ≥ 1 s to compile (its default); a warm run would
     # compile the small ones again each time (the scene build's array operations, the
     # contact histories: ~20 programs, about a second). Unless the user chose a threshold.
@@ -138,3 +139,52 @@ def enable_caches(path: str | os.PathLike | None = None) -> str | None:
             stacklevel=2,
         )
     return _enable(chosen)
+
+
+def _heal_damaged_entries() -> None:
+    """Make JAX discard a compilation cache entry it cannot read, so it is rewritten.
+
+    JAX warns about an entry it cannot decompress or deserialize (about twenty lines per
+    program), compiles the program again, and then does not store it, because a file under
+    its key exists: every later run pays the compile and the warnings again. Its reader is
+    wrapped here: an entry that fails is deleted with one line naming the cache, and JAX's
+    own write after the compile stores a good one. This reaches into `jax._src` (there is no
+    public hook); where that has changed, nothing is wrapped and JAX behaves as before.
+    """
+    try:
+        from jax._src import compilation_cache as jax_cache
+        from jax._src import compiler
+    except ImportError:
+        return
+    read = getattr(jax_cache, "get_executable_and_time", None)
+    if read is None or getattr(read, "_jaxdeploy_heals", False):
+        return
+
+    def get_executable_and_time(cache_key, *args, **kwargs):
+        try:
+            return read(cache_key, *args, **kwargs)
+        except Exception as err:  # noqa: BLE001 - whatever JAX could not read is dropped
+            if compiler._should_raise_persistent_cache_error(err):
+                raise
+            _discard(cache_key, err)
+            return None, None
+
+    get_executable_and_time._jaxdeploy_heals = True
+    jax_cache.get_executable_and_time = get_executable_and_time
+
+
+def _discard(cache_key: str, err: Exception) -> None:
+    import jax
+
+    folder = jax.config.jax_compilation_cache_dir
+    print(
+        f"warning: compilation cache: discarding the damaged entry {cache_key} in {folder} "
+        f"({type(err).__name__}); compiling again and rewriting it (if this recurs, delete "
+        "the folder)",
+        file=sys.stderr,
+    )
+    for suffix in ("-cache", "-atime"):  # jax._src.lru_cache's file names
+        try:
+            os.unlink(os.path.join(folder, f"{cache_key}{suffix}"))
+        except (OSError, TypeError):
+            pass

@@ -295,3 +295,44 @@ def test_resume_on_another_grid_names_the_differing_field(tmp_path, capsys):
     assert "grid.length: [1.0, 2.0] in the folder, [1.0, 3.0] now" in err
     assert "t_end" not in err and len(err) < 400  # the differing field, not the dictionary
     assert _entries(out) == ["manifest.json"]
+
+
+# --- caches -------------------------------------------------------------------------------
+
+
+def test_a_damaged_compilation_cache_entry_is_discarded_once_and_rewritten(tmp_path):
+    """Issue 30: damaged entries printed ~20 raw JAX warnings on every later run and were
+    compiled again every time (JAX does not overwrite an existing file). Now: one line per
+    entry, and the next process reads a good entry silently."""
+    import subprocess
+    import sys
+
+    script = (
+        "import sys\n"
+        "from jaxdeploy._compilation_cache import enable_caches\n"
+        "enable_caches(sys.argv[1])\n"
+        "import jax, jax.numpy as jnp\n"
+        "print(float(jax.jit(lambda x: jnp.sin(x) * 3.0 + x**2)(jnp.float32(0.5))))\n"
+    )
+    cache = tmp_path / "xla"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+    def run():
+        done = subprocess.run(
+            [sys.executable, "-c", script, str(cache)], capture_output=True, text=True, env=env
+        )
+        assert done.returncode == 0, done.stderr
+        return done.stdout, done.stderr
+
+    first, _ = run()
+    entries = sorted(cache.glob("*-cache"))
+    assert entries
+    for entry in entries:
+        entry.write_bytes(b"damaged")
+    second, err = run()
+    assert second == first
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == len(entries)
+    assert all(line.startswith("warning: compilation cache: discarding") for line in lines)
+    third, err = run()
+    assert third == first and err.strip() == ""
