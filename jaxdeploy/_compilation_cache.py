@@ -142,49 +142,62 @@ def enable_caches(path: str | os.PathLike | None = None) -> str | None:
 
 
 def _heal_damaged_entries() -> None:
-    """Make JAX discard a compilation cache entry it cannot read, so it is rewritten.
+    """Make JAX's compilation cache drop an entry it cannot read, so that it is rewritten.
 
-    JAX warns about an entry it cannot decompress or deserialize (about twenty lines per
-    program), compiles the program again, and then does not store it, because a file under
-    its key exists: every later run pays the compile and the warnings again. Its reader is
-    wrapped here: an entry that fails is deleted with one line naming the cache, and JAX's
-    own write after the compile stores a good one. This reaches into `jax._src` (there is no
-    public hook); where that has changed, nothing is wrapped and JAX behaves as before.
+    JAX warns about an entry it cannot decompress or deserialize ("Error reading persistent
+    compilation cache entry for 'NAME'"), compiles the program again, and then does not store
+    it, because a file under its key exists: every later run pays the compile and the
+    warnings again. JAX has no public hook for this; its warning is public behaviour, so it
+    is caught here (`warnings.showwarning`): the cache's entries of that program's name
+    (`NAME-KEY-cache`; the damaged one among them, and any other shapes of the same program,
+    which are compiled and stored again once) are deleted with one line naming the cache and
+    the remedy, and JAX's own write after the compile stores a good entry.
     """
-    try:
-        from jax._src import compilation_cache as jax_cache
-        from jax._src import compiler
-    except ImportError:
+    if getattr(warnings.showwarning, "_jaxdeploy_heals", False):
         return
-    read = getattr(jax_cache, "get_executable_and_time", None)
-    if read is None or getattr(read, "_jaxdeploy_heals", False):
-        return
+    shown = warnings.showwarning
 
-    def get_executable_and_time(cache_key, *args, **kwargs):
-        try:
-            return read(cache_key, *args, **kwargs)
-        except Exception as err:  # noqa: BLE001 - whatever JAX could not read is dropped
-            if compiler._should_raise_persistent_cache_error(err):
-                raise
-            _discard(cache_key, err)
-            return None, None
+    def showwarning(message, category, filename, lineno, file=None, line=None):
+        text = str(message)
+        if text.startswith(_READ_ERROR):
+            name = text[len(_READ_ERROR) :].split("'", 1)[0]
+            if name and _discard(name, text):
+                return
+        shown(message, category, filename, lineno, file, line)
 
-    get_executable_and_time._jaxdeploy_heals = True
-    jax_cache.get_executable_and_time = get_executable_and_time
+    showwarning._jaxdeploy_heals = True
+    warnings.showwarning = showwarning
 
 
-def _discard(cache_key: str, err: Exception) -> None:
+# The start of JAX's warning about an entry it cannot read (jax/_src/compiler.py), followed
+# by the program's name and a quote.
+_READ_ERROR = "Error reading persistent compilation cache entry for '"
+
+
+def _discard(name: str, text: str) -> bool:
+    """Delete the compilation cache's entries of program `name`; False when there are none
+    (then JAX's warning is shown as it is)."""
+    import glob
+
     import jax
 
     folder = jax.config.jax_compilation_cache_dir
+    if not folder or os.sep in name:
+        return False
+    entries = glob.glob(os.path.join(glob.escape(folder), f"{glob.escape(name)}-*-cache"))
+    if not entries:
+        return False
+    for path in entries:
+        for doomed in (path, path[: -len("-cache")] + "-atime"):  # jax's file names
+            try:
+                os.unlink(doomed)
+            except OSError:
+                pass
+    reason = text.split(": ", 1)[-1][:120]
     print(
-        f"warning: compilation cache: discarding the damaged entry {cache_key} in {folder} "
-        f"({type(err).__name__}); compiling again and rewriting it (if this recurs, delete "
-        "the folder)",
+        f"warning: compilation cache: discarding {len(entries)} entry(ies) of {name} in "
+        f"{folder} that JAX could not read ({reason}); compiling again and rewriting them "
+        "(if this recurs, delete the folder)",
         file=sys.stderr,
     )
-    for suffix in ("-cache", "-atime"):  # jax._src.lru_cache's file names
-        try:
-            os.unlink(os.path.join(folder, f"{cache_key}{suffix}"))
-        except (OSError, TypeError):
-            pass
+    return True

@@ -28,6 +28,16 @@ import time
 
 from .io import check_output_dir
 
+# Folders claimed by this process and not yet closed: `close_all` releases them when the
+# process ends at once (Ctrl-C in the command line, which does not unwind).
+_open: set = set()
+
+
+def close_all() -> None:
+    """Close every folder this process holds (remove uncommitted staging, release locks)."""
+    for folder in list(_open):
+        folder.close()
+
 
 class FolderBusy(FileExistsError):
     """The output folder is held by another run."""
@@ -99,6 +109,7 @@ class OutputFolder:
                 same = False
             if same:
                 self._fd = fd
+                _open.add(self)
                 holder = {
                     "pid": os.getpid(),
                     "host": socket.gethostname(),
@@ -145,6 +156,7 @@ class OutputFolder:
                 pass
             os.close(self._fd)  # releases the flock
             self._fd = None
+        _open.discard(self)
 
     def __enter__(self) -> OutputFolder:
         return self
@@ -174,6 +186,7 @@ class FolderLock:
 
     def __init__(self, path: str):
         self._folder = OutputFolder(path)
+        self._folder.committed = True  # nothing staged: closing removes nothing
 
     def claim(self) -> FolderLock:
         folder = self._folder
@@ -189,7 +202,6 @@ class FolderLock:
         return self
 
     def close(self) -> None:
-        self._folder.committed = True  # nothing staged
         self._folder.close()
 
     def __enter__(self) -> FolderLock:

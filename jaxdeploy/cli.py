@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 
 from ._compilation_cache import enable_compilation_cache, prefer_cacheable_errors
 
 prefer_cacheable_errors()  # before any command module imports equinox
 
-from .commands import discover  # noqa: E402
-from .commands._args import EXIT_INTERRUPTED  # noqa: E402
+from .commands import EXIT_INTERRUPTED, discover  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -28,20 +28,39 @@ def main(argv=None) -> int:
         # so that callers of `main` (tests, scripts) see it like any other refusal.
         return exit_.code
     enable_compilation_cache()
+    if argv is None:
+        signal.signal(signal.SIGINT, _interrupted(args.command))
     try:
         return runners[args.command](args)
     except KeyboardInterrupt:
-        # One line, not a traceback; what a command finished is already on disk (files are
-        # written atomically, a sweep's chunks as they finish) and what it had not is removed
-        # on the way out (the staging folder of `jaxdeploy._output_folder`).
-        print(f"interrupted: jaxdeploy {args.command} stopped (Ctrl-C)", file=sys.stderr)
-        if argv is None:
-            # The program itself: end now, without the interpreter's shutdown, which can crash
-            # while XLA's threads are still compiling (a segfault instead of exit 130).
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(EXIT_INTERRUPTED)
+        # (Called with `argv`, as tests and scripts do: the exception unwinds, and the output
+        # folder's `with` block removes what the run had not finished.)
+        print(_interrupt_line(args.command), file=sys.stderr)
         return EXIT_INTERRUPTED
+
+
+def _interrupt_line(command: str) -> str:
+    return f"interrupted: jaxdeploy {command} stopped (Ctrl-C)"
+
+
+def _interrupted(command: str):
+    """The program's SIGINT handler: one line, the output folders closed (an unfinished
+    result's staging folder removed, the lock released; a sweep's finished chunks are already
+    on disk, each written atomically), exit 130 at once. Not a `KeyboardInterrupt`: raised
+    inside a callback (JAX's garbage-collection hook) it is swallowed and the command runs
+    on; and the interpreter's shutdown can crash while XLA's threads still compile. Python
+    runs the handler once the main thread is back from native code (after a compile)."""
+
+    def handler(signum, frame):
+        from ._output_folder import close_all
+
+        print(_interrupt_line(command), file=sys.stderr)
+        close_all()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(EXIT_INTERRUPTED)
+
+    return handler
 
 
 if __name__ == "__main__":

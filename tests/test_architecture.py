@@ -15,6 +15,7 @@ FLOORS = {
     "_validation": 0,
     "_version": 0,
     "io": 0,
+    "_output_folder": 0,
     "pages": 0,
     "_compilation_cache": 0,
     "_program_cache": 0,

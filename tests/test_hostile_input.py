@@ -336,3 +336,34 @@ def test_a_damaged_compilation_cache_entry_is_discarded_once_and_rewritten(tmp_p
     assert all(line.startswith("warning: compilation cache: discarding") for line in lines)
     third, err = run()
     assert third == first and err.strip() == ""
+
+
+def test_ctrl_c_during_a_sweep_keeps_every_finished_chunk(tmp_path):
+    """A real SIGINT to the program: one line, exit 130 (not a traceback, not a segfault, not
+    swallowed by a callback), the chunks finished so far kept and the folder's lock gone."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "sweep"
+    command = [sys.executable, "-m", "jaxdeploy.cli", "sweep", "--scene", "pendulum",
+               "--grid", "length=0.5:2.5:40", "--t-end", "20", "--n-save", "3",
+               "--chunk-size", "1", "--no-trajectories", "--quiet", "--out", str(out)]  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "JAXDEPLOY_CACHE_DIR": "off"}
+    proc = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, env=env)
+    manifest = out / "manifest.json"
+    deadline = time.time() + 600
+    while proc.poll() is None and time.time() < deadline:
+        if manifest.exists() and json.loads(manifest.read_text())["chunks"]:
+            break
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=600)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "interrupted: jaxdeploy sweep stopped (Ctrl-C)"
+    assert "Traceback" not in err
+    chunks = json.loads(manifest.read_text())["chunks"]
+    assert 1 <= len(chunks) < 40
+    assert all((out / c["file"]).exists() for c in chunks)
+    assert _entries(tmp_path) == ["sweep"]  # no lock left beside it

@@ -100,7 +100,9 @@ def test_sigkill_in_the_middle_of_a_write_never_leaves_a_truncated_result(tmp_pa
 
 
 def test_a_crashed_rerun_cannot_pass_for_a_complete_result(tmp_path, monkeypatch):
-    """With --overwrite, the old completion marker (summary.json) goes before new files come."""
+    """With --overwrite, a rerun that dies leaves the previous complete result as it was (the
+    rerun writes into a staging folder that replaces it only when complete: issue 30), never
+    a mix of old and new files."""
     out = tmp_path / "run"
     args = ["simulate", "pendulum", "--t-end", "0.05", "--out", str(out), "--quiet"]
     assert main(args) == 0
@@ -116,10 +118,11 @@ def test_a_crashed_rerun_cannot_pass_for_a_complete_result(tmp_path, monkeypatch
         raise RuntimeError("killed while writing the trajectory (simulated)")
 
     monkeypatch.setattr(jaxdeploy.io, "atomic_write_npz", dying_npz)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
     with pytest.raises(RuntimeError, match="simulated"):
         main([*args, "--overwrite"])
-    assert not (out / "summary.json").exists()
-    assert _leftovers(out) == []
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert _leftovers(out) == [] and sorted(os.listdir(tmp_path)) == ["run"]
 
 
 def _git(folder, *args):

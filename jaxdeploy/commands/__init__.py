@@ -12,6 +12,13 @@ from __future__ import annotations
 import importlib
 import pkgutil
 
+# Exit codes of every command (README.md, "Exit codes"); `fit` adds its verdicts 3-5.
+EXIT_OK = 0
+EXIT_FAILED = 1  # the solver failed (status names when and why), or the run raised
+EXIT_REFUSED = 2  # a refused command line: nothing written, nothing compiled
+EXIT_IMPLAUSIBLE = 6  # the run finished but failed a plausibility check (status names it)
+EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT, the shell's convention)
+
 
 def discover() -> list:
     """The command modules, sorted by name."""

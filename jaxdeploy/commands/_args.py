@@ -11,6 +11,14 @@ import argparse
 import math
 import sys
 
+from . import (  # noqa: F401 - the exit codes, for the command modules
+    EXIT_FAILED,
+    EXIT_IMPLAUSIBLE,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_REFUSED,
+)
+
 STEP_CONTROL_FLAGS = ("--solver", "--rtol", "--atol", "--dt-max", "--dt")
 # Named here for the help texts, which must not import JAX: the presets of
 # `jaxdeploy.objectives.PRESETS` and `jaxdeploy.sweep.DEFAULT_CHUNK_SIZE` (tests/test_cli_help.py
@@ -23,14 +31,6 @@ SET_HELP = (
     "SCENE` lists the parameters with their units and valid ranges; default: none (the "
     "scene's defaults)"
 )
-
-
-# Exit codes of every command (README.md, "Exit codes"); `fit` adds its verdicts 3-5.
-EXIT_OK = 0
-EXIT_FAILED = 1  # the solver failed (status names when and why), or the run raised
-EXIT_REFUSED = 2  # a refused command line: nothing written, nothing compiled
-EXIT_IMPLAUSIBLE = 6  # the run finished but failed a plausibility check (status names it)
-EXIT_INTERRUPTED = 130  # Ctrl-C (128 + SIGINT, the shell's convention)
 
 
 def refuse(message: str) -> int:

@@ -52,6 +52,14 @@ def size_text(n_bytes: float) -> str:
     return f"{n_bytes:.0f} B"
 
 
+def duration_text(seconds: float) -> str:
+    """`seconds` in the largest unit that keeps the number ≥ 1 (days, hours, minutes, s)."""
+    for unit, size in (("days", 86400.0), ("hours", 3600.0), ("minutes", 60.0)):
+        if seconds >= size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds:.3g} s"
+
+
 def saved_state_bytes(mechanism, n_save: int, runs: int = 1) -> int:
     """Bytes of the saved states of `runs` runs of `mechanism` with `n_save` saved times: q,
     q̇, q̈ (n each) and λ (m) per saved time, float64, times `OUTPUT_COPIES`."""

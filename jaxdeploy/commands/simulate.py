@@ -130,10 +130,9 @@ def is_number(value) -> bool:
 
 
 def _duration(seconds: float) -> str:
-    for unit, size in (("days", 86400.0), ("hours", 3600.0), ("minutes", 60.0)):
-        if seconds >= size:
-            return f"{seconds / size:.3g} {unit}"
-    return f"{seconds:.3g} s"
+    from ._plan import duration_text
+
+    return duration_text(seconds)
 
 
 def run(args) -> int:

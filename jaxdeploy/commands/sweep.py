@@ -322,7 +322,8 @@ def _check_duration(args, plan) -> None:
     """Refuse (`ValueError`) a sweep estimated to run longer than `simulate.LONG_RUN_S`
     without --long-run: `simulate`'s rate per simulated second of the scene, times the
     cases, over the devices (an upper estimate: a vmapped chunk costs less per case)."""
-    from .simulate import INTEGRATE_S_PER_SIMULATED_S, LONG_RUN_S, _duration
+    from ._plan import duration_text
+    from .simulate import INTEGRATE_S_PER_SIMULATED_S, LONG_RUN_S
 
     scene = plan.scene
     rate = INTEGRATE_S_PER_SIMULATED_S.get(scene.name)
@@ -333,8 +334,8 @@ def _check_duration(args, plan) -> None:
         if estimate > LONG_RUN_S:
             raise ValueError(
                 f"{plan.n_cases} cases of {scene.name} to --t-end = {plan.t_end:g} s would run "
-                f"for about {_duration(estimate)} (~{rate:g} s per simulated second and case on "
-                f"one core, {jax.device_count()} device(s)); pass --long-run to start it anyway"
+                f"for about {duration_text(estimate)} (~{rate:g} s per simulated second and case "
+                f"on one core, {jax.device_count()} device(s)); pass --long-run to start it anyway"
             )
 
 
