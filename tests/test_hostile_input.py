@@ -18,6 +18,13 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 DATA = ROOT / "examples" / "slider_crank_slider_x.csv"
 
 
+@pytest.fixture(autouse=True)
+def _no_persistent_caches(monkeypatch):
+    """The commands run here with their caches off: nothing is written to the user's cache,
+    and no later test in this process finds JAX's compilation cache switched on by them."""
+    monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", "off")
+
+
 def _run(capsys, *argv):
     """`(exit code, stderr)` of `jaxdeploy ARGV` run in this process."""
     code = main([str(a) for a in argv])
