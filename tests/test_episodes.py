@@ -58,6 +58,11 @@ def test_hertz_impact_episode_against_johnsons_closed_forms():
     np.testing.assert_allclose(row["impact_velocity"], v0, rtol=2e-9)
     np.testing.assert_allclose(row["peak_penetration"], delta_max, rtol=1e-8)
     np.testing.assert_allclose(row["peak_force"], f_max, rtol=1e-8)
+    # The run's extremes take the refined peak too (not a sample at step ends and midpoints).
+    np.testing.assert_allclose(float(trajectory.extremes["normal_force_max"][0]), f_max, rtol=1e-8)
+    np.testing.assert_allclose(
+        float(trajectory.extremes["penetration_max"][0]), delta_max, rtol=1e-8
+    )
     # Duration 2.9433 δ_max/v0: Johnson's constant has five digits.
     duration = row["separation_time"] - row["onset_time"]
     np.testing.assert_allclose(duration, 2.9433 * delta_max / v0, rtol=2e-5)

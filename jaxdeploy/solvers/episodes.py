@@ -64,7 +64,8 @@ UNITS = {
 class EpisodeLog(NamedTuple):
     """Per clearance joint (first axis, the order of `mechanism.find(RevoluteClearance)`):
     `count` (k,) episodes begun so far, and each of `FIELDS` as a (k, capacity) array (NaN in
-    slots not reached)."""
+    slots not reached); `force_max`, `penetration_max` (k,): the refined peaks over every
+    contact step of the run, whatever the capacity (what `Trajectory.extremes` reports)."""
 
     count: jax.Array
     onset_time: jax.Array
@@ -74,6 +75,8 @@ class EpisodeLog(NamedTuple):
     peak_force_time: jax.Array
     peak_penetration: jax.Array
     impulse: jax.Array
+    force_max: jax.Array
+    penetration_max: jax.Array
 
 
 def step_maximum(f, t0, t1, samples: int = SAMPLES, iterations: int = NEWTON):
@@ -156,7 +159,12 @@ def init_log(mechanism, t0, y0, capacity: int = DEFAULT_CAPACITY) -> EpisodeLog 
         return None
     k = len(joints)
     nan = jnp.full((k, capacity), jnp.nan, dtype=y0.q.dtype)
-    log = EpisodeLog(jnp.zeros((k,), dtype=jnp.int32), *([nan] * len(FIELDS)))
+    log = EpisodeLog(
+        jnp.zeros((k,), dtype=jnp.int32),
+        *([nan] * len(FIELDS)),
+        jnp.full((k,), -jnp.inf, dtype=y0.q.dtype),
+        jnp.full((k,), -jnp.inf, dtype=y0.q.dtype),
+    )
     for row, index in enumerate(joints):
         state = _joint_state(mechanism, index, y0.memory)
         if state is None:
@@ -213,7 +221,8 @@ def log_step(log, mechanism, t0, t1, y0, y1, motion, capacity: int = DEFAULT_CAP
         log = _begin(log, row, began, t0 + fraction * h, v_minus, capacity)
         slot = jnp.clip(log.count[row] - 1, 0, capacity - 1)
         open_ = (log.count[row] > 0) & (log.count[row] <= capacity)
-        touched = (was_in | now_in) & open_
+        in_step = was_in | now_in
+        touched = in_step & open_
 
         def peaks(joint_index=index, memory=step_memory):
             def force(t):
@@ -232,7 +241,7 @@ def log_step(log, mechanism, t0, t1, y0, y1, motion, capacity: int = DEFAULT_CAP
             zero = jnp.zeros((), dtype=y0.q.dtype)
             return t0 + zero, zero, jnp.full((), -jnp.inf, dtype=zero.dtype), zero
 
-        t_force, f_max, d_max, impulse = jax.lax.cond(touched, peaks, nothing)
+        t_force, f_max, d_max, impulse = jax.lax.cond(in_step, peaks, nothing)
         row_force = log.peak_force[row, slot]
         higher = touched & (f_max > row_force)
         log = log._replace(
@@ -248,6 +257,8 @@ def log_step(log, mechanism, t0, t1, y0, y1, motion, capacity: int = DEFAULT_CAP
                 )
             ),
             impulse=log.impulse.at[row, slot].add(jnp.where(touched, impulse, 0.0)),
+            force_max=log.force_max.at[row].max(jnp.where(in_step, f_max, -jnp.inf)),
+            penetration_max=log.penetration_max.at[row].max(jnp.where(in_step, d_max, -jnp.inf)),
             separation_time=log.separation_time.at[row, slot].set(
                 jnp.where(ended & open_, t0 + fraction * h, log.separation_time[row, slot])
             ),
