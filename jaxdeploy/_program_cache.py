@@ -230,6 +230,12 @@ def call(fn, *args):
             _unexportable.add(cache_key)  # not tried again in this process
             return fn(*args)
         _store(path, payload)
+        # An executable kept beside an entry that was missing or discarded belongs to the
+        # program that was there before: compile the new one afresh.
+        try:
+            os.unlink(_executable_path(path))
+        except OSError:
+            pass
         # Run what was stored, read back: deserializing drops weak types, so the program
         # that wrote the entry would give outputs that differ from a later hit's in them
         # (and so miss the keys of the programs they flow into).
