@@ -275,12 +275,70 @@ def _executable(cache_key, path, exported, arrays):
     began = time.time()
     compiled = _load_executable(where)
     if compiled is None:
-        compiled = jax.jit(exported.call).lower(*arrays).compile()
-        _store_executable(where, compiled)
+        compiled = _compile_and_keep(exported, arrays, where)
     else:  # reported like JAX's compile events (a command's phases count it as compiling)
         jax.monitoring.record_event_time_span(LOAD_EVENT, began, time.time())
+        compiled = _Kept(compiled, where, exported, arrays)
     _compiled[cache_key] = compiled
     return compiled
+
+
+def _compile_and_keep(exported, arrays, where):
+    """Compile `exported` for `arrays` and keep the executable at `where`, unless XLA's
+    code came from JAX's persistent compilation cache: such an executable serializes without
+    its object code, and running it read back fails with "NOT_FOUND: Function ... not found"
+    (jax 0.10.2, seen on the second of two in-process `jaxdeploy simulate` runs)."""
+    import jax
+
+    _watch_cache_hits()
+    hits = getattr(_hits, "count", 0)
+    compiled = jax.jit(exported.call).lower(*arrays).compile()
+    if getattr(_hits, "count", 0) == hits:
+        _store_executable(where, compiled)
+    return compiled
+
+
+_hits = threading.local()  # persistent-cache hits of this thread's compiles
+
+
+@functools.cache
+def _watch_cache_hits() -> None:
+    import jax
+
+    def count(event, **_):
+        if event == "/jax/compilation_cache/cache_hits":
+            _hits.count = getattr(_hits, "count", 0) + 1
+
+    jax.monitoring.register_event_listener(count)
+
+
+class _Kept:
+    """An executable read back from the disk; if it cannot run (code missing from what was
+    kept), the file is discarded with one line and the program compiled again."""
+
+    def __init__(self, compiled, where, exported, arrays):
+        self.compiled, self.where, self.exported, self.arrays = compiled, where, exported, arrays
+
+    def __call__(self, *arrays):
+        import jax
+
+        try:
+            return self.compiled(*arrays)
+        except jax.errors.JaxRuntimeError as err:
+            if "NOT_FOUND" not in str(err):
+                raise
+            warnings.warn(
+                f"discarding the kept compiled program {self.where}, which cannot run ({err}); "
+                "compiling it again",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+            try:
+                os.unlink(self.where)
+            except OSError:
+                pass
+            self.compiled = _compile_and_keep(self.exported, self.arrays, self.where)
+            return self.compiled(*arrays)
 
 
 @functools.cache

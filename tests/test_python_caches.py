@@ -72,6 +72,23 @@ def test_second_process_traces_no_program_and_gives_identical_results(tmp_path):
     assert second["bits"] == first["bits"]  # bit for bit
 
 
+def test_executables_kept_only_when_compiled_here(tmp_path):
+    """An executable JAX read from its persistent compilation cache serializes without its
+    object code (read back, it fails: "NOT_FOUND: Function ... not found", jax 0.10.2): with
+    the kept executables gone but JAX's cache filled, the next process compiles from JAX's
+    cache and keeps nothing, and the one after it runs, with the same results."""
+    cache = tmp_path / "cache"
+    first = _run(tmp_path, str(cache))
+    kept = list((tmp_path / "cache-programs").glob("*.executable"))
+    assert kept
+    for path in kept:
+        path.unlink()
+    second = _run(tmp_path, str(cache))
+    assert not list((tmp_path / "cache-programs").glob("*.executable"))
+    third = _run(tmp_path, str(cache))
+    assert first["bits"] == second["bits"] == third["bits"]
+
+
 def test_caches_called_after_equinox_warn_and_keep_the_compilation_cache(tmp_path):
     """Called after equinox was imported with raising checks, `enable_caches` cannot make
     programs exportable: it says so and turns on the compilation cache alone."""
