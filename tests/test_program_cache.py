@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from jax.experimental.compilation_cache import compilation_cache
 
 from jaxdeploy import _program_cache
 
@@ -30,9 +31,18 @@ def store(tmp_path, monkeypatch):
     monkeypatch.setattr(_program_cache, "_unexportable", set())
     monkeypatch.setattr(_program_cache, "_loaded", {})
     monkeypatch.setattr(_program_cache, "_compiled", {})
+    # JAX's own persistent cache off: an earlier test in this process (a command's `main`)
+    # may have switched it on and compiled the toy program, and an executable JAX reads from
+    # it is not kept (`_program_cache._compile_and_keep`), so the kept-executable tests would
+    # depend on the order the tests run in.
+    enabled = jax.config.jax_enable_compilation_cache
+    jax.config.update("jax_enable_compilation_cache", False)
+    compilation_cache.reset_cache()  # JAX reads the setting once per process otherwise
     _program_cache.enable(str(tmp_path / "programs"))
     yield tmp_path / "programs"
     _program_cache.enable(None)
+    jax.config.update("jax_enable_compilation_cache", enabled)
+    compilation_cache.reset_cache()
 
 
 def _entries(folder):
