@@ -181,34 +181,57 @@ def test_impact_adaptive_steps_replayed_match_central_differences():
         np.testing.assert_allclose(rev[name], fd[name], rtol=0, atol=1e-5 * scale, err_msg=name)
 
 
-@pytest.mark.slow  # three slider-crank compilations and a revolution each: ~4 min
+# Forward against reverse mode on one slider-crank revolution, what agreement can mean.
+# Measured at 938a945 (load 25; the same parameter_jacobian calls as below), with the output
+# of every saved time 1.2, 2.4, ..., 12 ms: on the same replayed step sequence the modes agree
+# row by row to 2e-14 relative through 3.6 ms (the first impacts), and the later rows to
+# 7.8e-10 at 4.8 ms, up to 4.9e-8 relative per row, 1.15e-9 (default checkpoints) and 1.09e-9
+# (7 checkpoints) of the largest entry: the derivative of the discrete map through ~25 impacts
+# is ill-conditioned, and the two modes' different operation orders differ by its round-off.
+# The step sequence matters far more: re-adapting the steps for c_e changed by 1e-15 relative
+# (replay_steps runs the adaptive loop at the perturbed value) moves the derivative by 1.4 to
+# 17 times the largest entry, so agreement means anything only on one step sequence (what
+# `replay_steps` gives each mode). The 1e-10 this test asserted before held on no row after
+# 3.6 ms. Bounds: 1e-10 relative per row through 3.6 ms (the claim docs/identification.md
+# makes; measured 5.5e-14 at most), and 2.5e-9 of the largest entry over the revolution (2x the
+# measured).
+WELL_CONDITIONED_T = 3.7e-3
+MODES_AGREE_EARLY = 1e-10
+MODES_AGREE_REVOLUTION = 2.5e-9
+
+
+@pytest.mark.slow  # three slider-crank compilations and a revolution each: ~4 CPU-min
 def test_slider_crank_adaptive_derivative_independent_of_mode_and_checkpoints():
     """One crank revolution (12 ms, ~860 adaptive steps, many impacts). Before steps were
     replayed, forward mode and reverse mode with default and with 7 checkpoints disagreed
     by 1–3 % here: each program re-decided the accept/reject sequence, and round-off flipped
-    some decisions. With `replay_steps` all three differentiate the same discrete map."""
+    some decisions. With `replay_steps` all three differentiate the same discrete map: they
+    agree to 1e-10 through the first impacts (t ≤ 3.6 ms) and to the round-off of an
+    ill-conditioned derivative over the revolution (MODES_AGREE_REVOLUTION: measured)."""
     import diffrax as dfx
 
     scene = SliderCrank()
     base = scene.resolve_params({"sigma": 1e-6, "friction_coefficient": 0.05})
     t_end = 0.012
     ts = jnp.linspace(0.0, t_end, 11)
+    early = np.tile(np.asarray(ts[1:]) <= WELL_CONDITIONED_T, 2)
 
     def output(ch):
-        return jnp.concatenate([ch["slider_x"][5:] - ch["crank_x"][5:], 1e-3 * ch["rod_theta"][5:]])
+        return jnp.concatenate([ch["slider_x"][1:] - ch["crank_x"][1:], 1e-3 * ch["rod_theta"][1:]])
 
     wrt = ["restitution"]
     fwd = parameter_jacobian(scene, base, wrt, output, t_end, mode="forward", ts=ts)
+    fwd = np.asarray(fwd["restitution"])
+    scale = np.abs(fwd).max()
+    assert scale > 0 and early.sum() == 6
     for checkpoints in (None, 7):
         rev = parameter_jacobian(
             scene, base, wrt, output, t_end, ts=ts,
             adjoint=dfx.RecursiveCheckpointAdjoint(checkpoints=checkpoints),
         )  # fmt: skip
-        scale = np.abs(fwd["restitution"]).max()
-        assert scale > 0
-        np.testing.assert_allclose(
-            rev["restitution"], fwd["restitution"], rtol=0, atol=1e-10 * scale
-        )
+        rev = np.asarray(rev["restitution"])
+        np.testing.assert_allclose(rev[early], fwd[early], rtol=MODES_AGREE_EARLY, atol=0)
+        np.testing.assert_allclose(rev, fwd, rtol=0, atol=MODES_AGREE_REVOLUTION * scale)
 
 
 @pytest.mark.slow
