@@ -65,19 +65,19 @@ def enable_compilation_cache() -> str | None:
 def _enable(folder: str) -> str | None:
     """The compilation cache in `folder`, the program cache in `folder` + `-programs`.
 
-    Leaves a cache directory the user configured for JAX itself untouched. A cache that
-    cannot be created (read-only home) is skipped: compiling again is slower, not wrong.
+    Leaves a cache directory the user configured for JAX itself untouched. A folder that
+    cannot be created or written, or that other users could write into, is not used, with
+    one line saying so (`usable_folder`): compiling again is slower, not wrong.
     """
     import jax
 
     from . import _program_cache
 
-    _program_cache.enable(folder.rstrip(os.sep) + "-programs")
+    programs = folder.rstrip(os.sep) + "-programs"
+    _program_cache.enable(programs if usable_folder(programs, "program cache") else None)
     if jax.config.jax_compilation_cache_dir:
         return jax.config.jax_compilation_cache_dir
-    try:
-        os.makedirs(folder, exist_ok=True)
-    except OSError:
+    if not usable_folder(folder, "compilation cache"):
         return None
     jax.config.update("jax_compilation_cache_dir", folder)
     _heal_damaged_entries()
@@ -87,6 +87,59 @@ def _enable(folder: str) -> str | None:
     if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     return folder
+
+
+_judged: dict[str, bool] = {}
+
+
+def usable_folder(folder: str, cache: str) -> bool:
+    """Whether `cache`'s `folder` may be used: created if missing (private: mode 0700), a
+    folder, writable by this process, owned by its user and not writable by group or others.
+    Entries of every cache are loaded as code or unpickled (compiled executables, pickled tree
+    structures) or trusted as results (the reference runs), so a folder another user could
+    write into is not read. A folder that cannot be used is reported once per process, with
+    one line naming the cache, the reason and the remedy; the run goes on without that cache
+    (slower, the same results)."""
+    if folder in _judged:
+        return _judged[folder]
+    problem = folder_problem(folder)
+    if problem is not None:
+        print(
+            f"warning: {cache}: not using {folder}: {problem}; running without it (slower, "
+            "the same results)",
+            file=sys.stderr,
+        )
+    _judged[folder] = problem is None
+    return _judged[folder]
+
+
+def folder_problem(folder: str) -> str | None:
+    """Why `folder` cannot hold a cache (`usable_folder`), or None; creates it if missing."""
+    try:
+        os.makedirs(folder, mode=0o700, exist_ok=True)
+        info = os.stat(folder)
+    except OSError as err:
+        return (
+            f"it cannot be created ({err.strerror or type(err).__name__}); choose another "
+            "JAXDEPLOY_CACHE_DIR, or set JAXDEPLOY_CACHE_DIR=off"
+        )
+    mode = f"mode {info.st_mode & 0o777:o}, owner uid {info.st_uid}"
+    if hasattr(os, "getuid") and info.st_uid != os.getuid():
+        return (
+            f"it belongs to another user ({mode}) and its entries are loaded as code; choose "
+            "another JAXDEPLOY_CACHE_DIR"
+        )
+    if info.st_mode & 0o022:
+        return (
+            f"it is writable by other users ({mode}) and its entries are loaded as code; run "
+            f"`chmod go-w {folder}` or choose another JAXDEPLOY_CACHE_DIR"
+        )
+    if not os.access(folder, os.W_OK | os.X_OK):
+        return (
+            f"it is not writable ({mode}); run `chmod u+w {folder}` or choose another "
+            "JAXDEPLOY_CACHE_DIR"
+        )
+    return None
 
 
 def enable_caches(path: str | os.PathLike | None = None) -> str | None:

@@ -374,3 +374,65 @@ def test_ctrl_c_during_a_sweep_keeps_every_finished_chunk(tmp_path):
     assert 1 <= len(chunks) < 40
     assert all((out / c["file"]).exists() for c in chunks)
     assert _entries(tmp_path) == ["sweep"]  # no lock left beside it
+
+
+def _cache_warnings(err: str) -> list[str]:
+    return [line for line in err.splitlines() if line.startswith("warning: ")]
+
+
+@pytest.fixture
+def _no_compilation_cache_yet():
+    """JAX's compilation cache unset for the test (another test in this process may have
+    set it; then the command would keep it and not judge its own folder), reset after."""
+    import jax
+
+    before = jax.config.jax_compilation_cache_dir
+    jax.config.update("jax_compilation_cache_dir", None)
+    yield
+    jax.config.update("jax_compilation_cache_dir", before)
+
+
+def test_a_cache_folder_that_cannot_be_created_is_reported_and_the_run_goes_on(
+    tmp_path, capsys, monkeypatch, _no_compilation_cache_yet
+):
+    from jaxdeploy import _compilation_cache, _program_cache
+
+    blocked = tmp_path / "a-file"
+    blocked.write_text("not a folder")
+    monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", str(blocked / "xla"))
+    monkeypatch.setattr(_compilation_cache, "_judged", {})
+    out = tmp_path / "run"
+    code, err = _run(capsys, "simulate", "pendulum", "--t-end", "0.01", "--n-save", "3",
+                     "--out", out, "--quiet")  # fmt: skip
+    assert code == 0
+    lines = _cache_warnings(err)
+    assert len(lines) == 2  # the program cache and the compilation cache, once each
+    assert all("it cannot be created" in line and "running without it" in line for line in lines)
+    assert _program_cache.folder() is None
+    assert _entries(tmp_path) == ["a-file", "run"]
+
+
+def test_a_cache_folder_other_users_can_write_is_not_read(
+    tmp_path, capsys, monkeypatch, _no_compilation_cache_yet
+):
+    from jaxdeploy import _compilation_cache, _program_cache
+    from jaxdeploy.commands import _reference_cache
+
+    base = tmp_path / "cache" / "xla"
+    shared = [base, tmp_path / "cache" / "xla-programs", tmp_path / "cache" / "xla-references"]
+    for folder in shared:
+        folder.mkdir(parents=True)
+        folder.chmod(0o777)
+    monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", str(base))
+    monkeypatch.setattr(_compilation_cache, "_judged", {})
+    code, err = _run(capsys, "simulate", "pendulum", "--t-end", "0.01", "--n-save", "3",
+                     "--out", tmp_path / "run", "--quiet")  # fmt: skip
+    assert code == 0
+    lines = _cache_warnings(err)
+    assert len(lines) == 2
+    assert all("writable by other users (mode 777" in line for line in lines)
+    assert all(f"chmod go-w {base}" in line for line in lines)
+    assert _program_cache.folder() is None
+    assert _reference_cache.folder() is None  # reported once, when first asked
+    assert "reference cache: not using" in capsys.readouterr().err
+    assert all(os.listdir(folder) == [] for folder in shared)  # nothing read, nothing written

@@ -13,8 +13,9 @@ wrote, bit for bit. Within one process (a sweep summarizing its cases) a referen
 kept in memory.
 
 Location: beside the compilation cache (`_compilation_cache.cache_dir()` + `-references`);
-off when that cache is off (`JAXDEPLOY_CACHE_DIR=off`). A cache that cannot be written is
-skipped (computing the reference again is slower, not wrong).
+off when that cache is off (`JAXDEPLOY_CACHE_DIR=off`). A folder that cannot be created or
+written, or that other users could write into, is not used, with one line saying so
+(`_compilation_cache.usable_folder`; computing the reference again is slower, not wrong).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._compilation_cache import cache_dir
+from .._compilation_cache import cache_dir, usable_folder
 from .._program_cache import code_digest
 
 
@@ -54,8 +55,13 @@ class StoredRun(NamedTuple):
 
 
 def folder() -> str | None:
+    """The cache's folder, or None: caches off, or a folder that cannot be used safely
+    (`_compilation_cache.usable_folder`: reported once, and references are computed)."""
     base = cache_dir()
-    return None if base is None else base.rstrip(os.sep) + "-references"
+    if base is None:
+        return None
+    where = base.rstrip(os.sep) + "-references"
+    return where if usable_folder(where, "reference cache") else None
 
 
 def key(scene, params, ts, control) -> str:
