@@ -401,11 +401,18 @@ def test_first_call_in_new_processes_gives_the_same_run_cold_and_cached():
     program cache's exported program) takes the same steps to the same error."""
     from benchmarks.work_precision import new_process_first_calls
 
-    runs = new_process_first_calls("tsit5", 1e-5)
+    # At the scene's default tolerance (rtol 1e-6, atol 1e-9: the run of
+    # test_independent_slider_crank's default-tolerance check), whose error against the
+    # reference is bounded the same way there. At rtol 1e-5 (what this test ran before) the error
+    # is set by where the steps happen to fall around the 11 impacts, so by round-off: the code
+    # of 7f9f43d gave 5.5e-7 m (272 steps) in make bench's run there, 4.9e-5 m (302) on another
+    # AMD EPYC (as main does), 3.4e-5 m (266) there with XLA_FLAGS=--xla_cpu_max_isa=AVX (jax
+    # 0.10.2 throughout); at rtol 1e-6 the same three give 6.3e-8, 1.73e-7 and 1.96e-7 m.
+    runs = new_process_first_calls("tsit5", 1e-6)
     cold, cached = runs["cold"], runs["cached"]
     assert cold["status"] == cached["status"] == "ok"
     assert cold["steps"] == cached["steps"] > 0
-    assert cold["error_m"] == cached["error_m"] < 1e-5
+    assert cold["error_m"] == cached["error_m"] < 3.5e-7
     assert cold["warm_calls"] >= 3 and cached["first_s"] > 0
 
 
