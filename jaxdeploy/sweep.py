@@ -24,7 +24,8 @@ address, process count and id from the usual `JAX_COORDINATOR_ADDRESS`, `JAX_NUM
 `JAX_PROCESS_ID` environment variables or the cluster's auto-detection). `jax.devices()` is then
 the global device list, each chunk is one program over all hosts' devices (inputs built with
 `jax.make_array_from_callback`, so each host supplies only its shards), results are gathered
-with `multihost_utils.process_allgather`, and only process 0 writes files.
+with `multihost_utils.process_allgather`, and only process 0 writes files (and holds the output
+folder's lock, `jaxdeploy sweep`).
 """
 
 from __future__ import annotations

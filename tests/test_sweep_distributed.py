@@ -30,14 +30,17 @@ def _free_port():
         return s.getsockname()[1]
 
 
-@pytest.mark.slow
-def test_sweep_as_two_processes_loses_and_duplicates_no_case(tmp_path):
+def _environment():
     env = {**os.environ, "JAX_PLATFORMS": "cpu"}
     env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
     env.pop("XLA_FLAGS", None)  # one device per process
     env["JAX_COORDINATOR_ADDRESS"] = f"127.0.0.1:{_free_port()}"
     env["JAX_NUM_PROCESSES"] = "2"
-    out = tmp_path / "two"
+    return env
+
+
+def _two_processes(tmp_path, env, out):
+    """Run the sweep as two `--distributed` processes into `out`: (exit codes, their output)."""
     # Output to files, not pipes: a process blocked on a full pipe that nobody reads yet
     # would miss the coordination service's shutdown barrier and take the other one down.
     logs = [tmp_path / f"process{i}.log" for i in range(2)]
@@ -49,8 +52,16 @@ def test_sweep_as_two_processes_loses_and_duplicates_no_case(tmp_path):
                                               stdout=sink, stderr=subprocess.STDOUT))  # fmt: skip
     for proc in processes:
         proc.wait(timeout=900)
-    report = "\n".join(f"process {k}: {log.read_text()[-2000:]}" for k, log in enumerate(logs))
-    assert all(proc.returncode == 0 for proc in processes), report
+    return [proc.returncode for proc in processes], [log.read_text() for log in logs]
+
+
+@pytest.mark.slow
+def test_sweep_as_two_processes_loses_and_duplicates_no_case(tmp_path):
+    env = _environment()
+    out = tmp_path / "two"
+    codes, logs = _two_processes(tmp_path, env, out)
+    report = "\n".join(f"process {k}: {log[-2000:]}" for k, log in enumerate(logs))
+    assert codes == [0, 0], report
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["process_count"] == 2 and len(manifest["devices"]) == 2
     assert manifest["n_cases"] == 9 and len(manifest["chunks"]) == 5
@@ -69,6 +80,21 @@ def test_sweep_as_two_processes_loses_and_duplicates_no_case(tmp_path):
     # One process vmaps a chunk's 2 cases on its one device, two processes run 1 case each:
     # other batch shapes, so the states agree to round-off (measured 3e-15 rad), not bit for bit.
     np.testing.assert_allclose(two["q"][order], reference["q"][ref_order], rtol=0, atol=1e-12)
+
+
+@pytest.mark.slow
+def test_two_processes_refuse_a_busy_folder_together(tmp_path):
+    """Another run holds the folder: process 0 (the one that locks and writes) says so, and
+    process 1 refuses with it instead of waiting for it in the first chunk (exit 2 both)."""
+    from jaxdeploy._output_folder import FolderLock
+
+    out = tmp_path / "busy"
+    with FolderLock(str(out)).claim():
+        codes, logs = _two_processes(tmp_path, _environment(), out)
+    assert codes == [2, 2], logs
+    assert "is in use by another run" in logs[0], logs[0]
+    assert "process 0 of this --distributed run refused" in logs[1], logs[1]
+    assert not out.exists()
 
 
 def test_distributed_environment_is_read_and_checked(monkeypatch):

@@ -199,17 +199,18 @@ def run(args) -> int:
             jax.distributed.initialize(**_distributed_from_environment())
         except ValueError as err:
             return refuse(f"--distributed: {err}")
+    lock, refusal = None, None
     try:
         plan = _validate(args)
         _plan_resources(args, plan)
-    except ValueError as err:
-        return refuse(str(err))
-    from .._output_folder import FolderLock
-
-    try:
-        lock = FolderLock(plan.out).claim()
-    except FileExistsError as err:
-        return refuse(str(err))
+        lock = _claim(plan.out)
+    except (ValueError, FileExistsError) as err:
+        refusal = str(err)
+    refusal = _agree(refusal)
+    if refusal is not None:
+        if lock is not None:
+            lock.close()
+        return refuse(refusal)
     with lock:
         try:
             manifest = _run(args, plan)
@@ -219,6 +220,50 @@ def run(args) -> int:
             print(f"error: {err}", file=sys.stderr)
             return EXIT_FAILED
         return _write(args, plan, manifest)
+
+
+def _claim(out: str):
+    """The output folder's lock (`FolderLock`), taken by process 0 only: it alone writes the
+    sweep (`jaxdeploy.sweep`), and the other processes of a `--distributed` run share its
+    folder (taken by each, the second process was refused 'in use by another run', the
+    first then waited for it in vain). Elsewhere a lock that holds nothing."""
+    import jax
+
+    from .._output_folder import FolderLock
+
+    if jax.process_index() == 0:
+        return FolderLock(out).claim()
+    return _NoLock()
+
+
+class _NoLock:
+    def close(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+
+def _agree(refusal: str | None) -> str | None:
+    """One verdict for all processes of a `--distributed` run (one collective): a process
+    that refuses alone would leave the others waiting for it inside the first chunk's program
+    until the coordination service times out. Returns this process's own refusal, or for a
+    process that had none while another refused, a line naming the one that did."""
+    import jax
+
+    if jax.process_count() == 1:
+        return refusal
+    import numpy as np
+    from jax.experimental import multihost_utils
+
+    refused = np.asarray(multihost_utils.process_allgather(np.int32(refusal is not None)))
+    if refusal is None and refused.any():
+        ids = ", ".join(str(i) for i in np.flatnonzero(refused))
+        refusal = f"process {ids} of this --distributed run refused (its message says why)"
+    return refusal
 
 
 class _Plan:
