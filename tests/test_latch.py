@@ -166,6 +166,36 @@ def test_potential_is_the_conservative_force_with_a_moving_roller_body():
     assert float(jnp.abs(forces[1] + forces[4])) < 1e-12
 
 
+def test_the_preload_stores_no_energy_before_its_anchor_is_set():
+    """Inside the step that engages the latch (past the stop, memory not yet engaged) the
+    preload's potential is 0, not −f·(r_P − the run's initial anchor): an energy meter booked
+    that difference as energy put in at the engagement (−2.7 J of deploy_array's 4.2 J), the
+    whole residual of its balance. After the engagement it is measured from the new anchor."""
+    a = Body("a", 2.0, 0.1, {"hole": (0.3, 0.0)})
+    b = Body("b", 1.0, 0.05, {"pin": (-0.2, 0.0)})
+    latch = PreloadedLatch(
+        "a",
+        "b",
+        lock_angle=0.1,
+        stiffness=40.0,
+        preload=30.0,
+        preload_body="b",
+        preload_point=(-0.17, 0.01),
+        preload_angle=2.5,
+    )
+    mech = Mechanism([a, b], [latch])
+    start = jnp.array([0.1, 0.2, 0.3, 0.5, 0.4, 0.35])  # α = 0.05: before the stop
+    (memory,) = mech.init_memory(start, jnp.zeros(6))
+    assert float(memory["engaged"]) == 0.0
+    past = jnp.array([0.1, 0.2, 0.3, 0.8, 0.1, 0.45])  # α = 0.15, P moved ~0.4 m away
+    kin = mech.kinematics(past)
+    elastic = 0.5 * 40.0 * (0.15 - 0.1) ** 2
+    assert float(latch.potential_energy(kin, memory)) == pytest.approx(elastic, rel=1e-12)
+    engaged = latch.memory_after_step(memory, kin, 1e-3)
+    assert float(engaged["engaged"]) == 1.0
+    assert float(latch.potential_energy(kin, engaged)) == pytest.approx(elastic, rel=1e-12)
+
+
 def test_bad_latch_arguments_are_named():
     with pytest.raises(ValueError, match=r"PreloadedLatch\.preload = -1\.0 N is invalid"):
         _panel(-1.0, 0.0, 0.0)
