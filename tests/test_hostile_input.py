@@ -79,6 +79,54 @@ def test_implausible_penetration_is_not_ok_and_exits_6(tmp_path, capsys):
     assert _entries(tmp_path) == ["run"]
 
 
+def test_an_energy_balance_that_does_not_close_is_not_ok_and_exits_6(tmp_path, capsys):
+    # Generalized-α with 20 steps per second on the pendulum: its numerical dissipation and
+    # error lose 2.3 % of the energy moved (the default dt = 1 ms: 9e-6); its drift (9e-5 m)
+    # fails too.
+    out = tmp_path / "run"
+    code = main(["simulate", "pendulum", "--dt", "0.05", "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 6
+    assert "error: the run implausible: " in err
+    assert "energy_balance = 0.023 exceeds its limit 0.003" in err
+    summary = json.loads((out / "summary.json").read_text())
+    (energy,) = [c for c in summary["plausibility"] if c["check"] == "energy_balance"]
+    assert energy["passed"] is False and energy["value"] == pytest.approx(0.023, abs=5e-4)
+    assert _entries(tmp_path) == ["run"]
+
+
+def test_an_energy_balance_that_cannot_be_computed_is_null_not_a_number():
+    from jaxdeploy.analysis.plausibility import energy_check, verdict
+    from jaxdeploy.io import strict_json
+    from jaxdeploy.mechanism import balance_metered, unmetered_because
+    from jaxdeploy.scenes import SliderCrank
+
+    scene = SliderCrank()
+    mechanism = scene.build(scene.resolve_params({}))
+    assert balance_metered(mechanism) is None  # the crank's driver does work
+    check = energy_check(None, unmetered_because(mechanism))
+    record = json.loads(strict_json(check.to_json()))
+    assert record["value"] is None and record["passed"] is None
+    assert "not computed: a driving constraint (AngleDriver)" in record["subject"]
+
+    class Finished:
+        ok = True
+
+    assert verdict(Finished(), [check]) == "ok"  # not computed is not a failure
+
+
+def test_a_contact_resolved_by_too_few_fixed_steps_is_not_ok(tmp_path, capsys):
+    # The impact's Hertz contact lasts 3.2e-4 s: fixed steps of 1.6e-4 s resolve it by two.
+    out = tmp_path / "run"
+    code = main(["simulate", "impact", "--dt", "1.6e-4", "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 6
+    assert "implausible: step_per_contact = " in err and "exceeds its limit 0.1" in err
+    summary = json.loads((out / "summary.json").read_text())
+    (steps,) = [c for c in summary["plausibility"] if c["check"] == "step_per_contact"]
+    assert steps["passed"] is False and "fixed step 0.00016 s" in steps["subject"]
+
+
 def test_failed_run_writes_null_and_exits_1(tmp_path, capsys):
     # Generalized-α with 0.5 s steps on a 1 s pendulum: Newton's iteration diverges.
     out = tmp_path / "run"
@@ -142,7 +190,8 @@ def test_outputs_that_do_not_fit_in_memory_are_refused(tmp_path, capsys, monkeyp
         capsys, "simulate", "slider_crank", "--n-save", "100000000", "--out", tmp_path / "a"
     )
     assert code == 2
-    assert "--n-save = 100000000" in err and "112 GB" in err and "12 GB a run may use" in err
+    # 4 copies × 8 B × 1e8 saved states × (q, q̇, q̈: 27, λ: 8, t: 1, memory: 13 numbers).
+    assert "--n-save = 100000000" in err and "154 GB" in err and "12 GB a run may use" in err
     assert _entries(tmp_path) == []
 
 
@@ -158,6 +207,33 @@ def test_a_sweep_of_hours_needs_long_run(tmp_path, capsys):
         tmp_path / "s",
     )
     assert code == 2 and "10000 cases" in err and "--long-run" in err
+    assert _entries(tmp_path) == []
+
+
+def test_a_sweep_of_several_chunks_is_timed_by_a_probe_before_it_starts(tmp_path, capsys):
+    out = tmp_path / "s"
+    code, err = _run(capsys, "sweep", "--scene", "pendulum", "--grid", "length=1:2:6",
+                     "--chunk-size", "2", "--t-end", "0.05", "--n-save", "3",
+                     "--no-trajectories", "--out", out)  # fmt: skip
+    assert code == 0
+    lines = err.splitlines()
+    probe = next(i for i, line in enumerate(lines) if line.startswith("probe: the first case"))
+    (estimate,) = [i for i, line in enumerate(lines) if line.startswith("sweep: 6 cases of")]
+    assert probe < estimate  # the estimate comes from the probe, before the batch
+    assert "the first case alone ran" in lines[estimate] and "× 6 cases" in lines[estimate]
+    assert json.loads((out / "manifest.json").read_text())["n_cases"] == 6
+
+
+def test_a_sweep_the_probe_times_past_15_minutes_needs_long_run(tmp_path, capsys, monkeypatch):
+    from jaxdeploy.commands import sweep
+
+    # The scene's rate allows it (1000 × 0.1 s × 0.3 s/s = 30 s); the probe says 1 s a case.
+    monkeypatch.setattr(sweep, "_probe_seconds", lambda plan, n_save, quiet: 1.0)
+    code, err = _run(capsys, "sweep", "--scene", "pendulum", "--grid", "length=1:2:1000",
+                     "--t-end", "0.1", "--out", tmp_path / "s")  # fmt: skip
+    assert code == 2
+    assert "1000 cases of pendulum to --t-end = 0.1 s: about 16.7 minutes" in err
+    assert "the first case alone ran 1 s" in err and "--long-run" in err
     assert _entries(tmp_path) == []
 
 

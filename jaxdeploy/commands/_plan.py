@@ -62,9 +62,23 @@ def duration_text(seconds: float) -> str:
 
 def saved_state_bytes(mechanism, n_save: int, runs: int = 1) -> int:
     """Bytes of the saved states of `runs` runs of `mechanism` with `n_save` saved times: q,
-    q̇, q̈ (n each) and λ (m) per saved time, float64, times `OUTPUT_COPIES`."""
+    q̇, q̈ (n each), λ (m) and the elements' memory per saved time, float64, times
+    `OUTPUT_COPIES`."""
     per_state = 3 * mechanism.n_coordinates + mechanism.n_constraints + 1
+    per_state += memory_floats(mechanism)
     return OUTPUT_COPIES * FLOAT_BYTES * per_state * int(n_save) * int(runs)
+
+
+def memory_floats(mechanism) -> int:
+    """Numbers in the memory of one saved state of `mechanism` (`init_memory`'s shapes;
+    traced abstractly, nothing is compiled): an energy meter's memory (`balance_metered`)
+    holds several copies of q, more than q itself."""
+    import jax
+    import numpy as np
+
+    q = jax.ShapeDtypeStruct((mechanism.n_coordinates,), np.float64)
+    shapes = jax.eval_shape(mechanism.init_memory, q, q)
+    return sum(int(np.prod(leaf.shape)) for leaf in jax.tree.leaves(shapes))
 
 
 def check_memory(n_bytes: int, what: str, remedy: str) -> None:

@@ -75,8 +75,9 @@ SUMMARY_KEYS = (
     (
         "plausibility",
         "",
-        "each plausibility check of the run (check, value, limit, unit, subject, passed); "
-        "docs/robustness.md",
+        "each plausibility check of the run (check, value, limit, unit, subject, passed; value "
+        "and passed null for a check the run cannot make, e.g. the energy balance with a "
+        "driver); docs/robustness.md",
     ),
 )
 

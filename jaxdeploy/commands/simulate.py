@@ -198,12 +198,14 @@ def _default_out(args) -> str:
 def _plan_run(args, scene, mechanism, control) -> None:
     """Refuse (`ValueError`) what the built mechanism shows cannot work: tolerances too loose
     for its clearances, outputs too large for the memory."""
+    from ..mechanism import balance_metered
     from . import _plan
 
     _plan.check_tolerances(mechanism, control)
     with_reference = not args.no_reference and scene.ideal_counterpart() is not None
+    run = balance_metered(mechanism) or mechanism  # the mechanism that runs, with its meter
     _plan.check_memory(
-        _plan.saved_state_bytes(mechanism, args.n_save, runs=2 if with_reference else 1),
+        _plan.saved_state_bytes(run, args.n_save, runs=2 if with_reference else 1),
         f"--n-save = {args.n_save} saved states of {scene.name}",
         "lower --n-save",
     )
@@ -298,7 +300,7 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, folder, p
     from ..analysis import analysis_class, episodes_csv
     from ..analysis.plausibility import plausibility_checks, verdict
     from ..io import atomic_write_bytes, atomic_write_json, atomic_write_npz, strict_json
-    from ..mechanism import RevoluteClearance
+    from ..mechanism import RevoluteClearance, balance_metered, balance_metered_state
     from ..simulation import simulate
     from ..solvers.step_control import scene_default_choice
     from ._results import failed_run_summary, run_quantities, units_of
@@ -314,6 +316,9 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, folder, p
         # in `result`.
         beside = _ReferenceBeside(scene, params, jnp.linspace(0.0, t_end, args.n_save), phases)
 
+    # The run meters its energy balance where the mechanism allows it (a plausibility check;
+    # the meter does not change how it steps).
+    metered = balance_metered(mechanism)
     label = f"integrate to t_end = {t_end:g} s ({control.solver_name()})"
     with phases.phase("integrate", label, split_compile=True):
         with (
@@ -321,8 +326,8 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, folder, p
             scene_default_choice(control, scene.default_control),
         ):
             trajectory = simulate(
-                mechanism,
-                initial,
+                mechanism if metered is None else metered,
+                initial if metered is None else balance_metered_state(metered, initial),
                 t_end,
                 n_save=args.n_save,
                 # diffrax's bar shows the simulated time as a percentage of t_end.
@@ -333,6 +338,7 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, folder, p
             )
         if beside is not None:
             beside.start()  # if the program cache did not (off, or the run not cacheable)
+        energy, trajectory = _energy_of(mechanism, metered, trajectory)
         # JAX has dispatched the run and returned: meanwhile, what does not need its result.
         versions = _while_running(mechanism, trajectory, analysis_type)
         trajectory.q.block_until_ready()
@@ -350,7 +356,7 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, folder, p
     analysis = analysis_type(scene, params, mechanism, trajectory, reference)
     with phases.phase("outputs", "outputs: summary quantities, plausibility, trajectory.npz"):
         quantities = analysis.summary()
-        checks = plausibility_checks(mechanism, trajectory) if trajectory.ok else []
+        checks = plausibility_checks(mechanism, trajectory, energy()) if trajectory.ok else []
         summary["status"] = verdict(trajectory, checks)
         # A failed run's quantities past its failure are not numbers to report (NaN states,
         # an extreme of a diverging force): null, with the status saying why.
@@ -397,6 +403,23 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, folder, p
             + "".join(f", {out}/{f}" for f in figures)
         )
     return _verdict_exit(summary["status"], trajectory)
+
+
+def _energy_of(mechanism, metered, trajectory):
+    """`(energy, trajectory)`: `energy()` the run's `plausibility.energy_check` (None when it
+    could not be metered: the check says why), and the run as one of `mechanism`, without
+    the meter's memory."""
+    from ..analysis.plausibility import energy_check
+    from ..mechanism import metered_balance, unmetered_because, without_balance_meter
+
+    if metered is None:
+        return lambda: energy_check(None, unmetered_because(mechanism)), trajectory
+
+    def energy():
+        return energy_check(metered_balance(metered, trajectory.q, trajectory.v, memory))
+
+    memory = trajectory.memory
+    return energy, without_balance_meter(trajectory)
 
 
 def _verdict_exit(status: str, trajectory) -> int:

@@ -203,6 +203,7 @@ def run(args) -> int:
     try:
         plan = _validate(args)
         _plan_resources(args, plan)
+        _estimate_by_probe(args, plan)
         lock = _claim(plan.out)
     except (ValueError, FileExistsError) as err:
         refusal = str(err)
@@ -382,6 +383,72 @@ def _check_duration(args, plan) -> None:
                 f"for about {duration_text(estimate)} (~{rate:g} s per simulated second and case "
                 f"on one core, {jax.device_count()} device(s)); pass --long-run to start it anyway"
             )
+
+
+def _estimate_by_probe(args, plan) -> None:
+    """Time a sweep of more than one chunk before it starts (its progress bar's ETA comes only
+    after the first chunk): its first case run alone to --t-end (after its compile, which is
+    not counted), times the cases still to run, over the devices. Printed
+    (unless --quiet); refused (`ValueError`) past `simulate.LONG_RUN_S` without --long-run.
+    Run after the cheap checks (`_plan_resources`): the probe compiles one case's program.
+
+    The estimate is of the order of the sweep's time, not a bound: a vmapped chunk costs
+    less per case than a case alone, but runs as many steps as its slowest case."""
+    import jax
+
+    from ._plan import duration_text
+    from .simulate import LONG_RUN_S
+
+    remaining = plan.n_cases - _cases_done(args, plan)
+    if remaining <= plan.chunk_size:
+        # One chunk: the sweep is its own first chunk, which the probe would only precede
+        # (the scene's rate, `_check_duration`, has bounded it already).
+        return
+    seconds = _probe_seconds(plan, args.n_save, quiet=args.quiet)
+    estimate = seconds * remaining / jax.device_count()
+    account = (
+        f"{remaining} cases of {plan.scene.name} to --t-end = {plan.t_end:g} s: about "
+        f"{duration_text(estimate)} (the first case alone ran {duration_text(seconds)} after "
+        f"compiling, × {remaining} cases / {jax.device_count()} device(s))"
+    )
+    if estimate > LONG_RUN_S and not args.long_run:
+        raise ValueError(f"{account}; pass --long-run to start it anyway")
+    if not args.quiet:
+        print(f"sweep: {account}", file=sys.stderr, flush=True)
+
+
+def _cases_done(args, plan) -> int:
+    """Cases a --resume finds finished (0 for a new sweep)."""
+    if not args.resume:
+        return 0
+    import json
+
+    try:
+        with open(os.path.join(plan.out, "manifest.json")) as fh:
+            chunks = json.load(fh).get("chunks", [])
+        return sum(int(c["stop"]) - int(c["start"]) for c in chunks)
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0  # the sweep itself reports a damaged manifest
+
+
+def _probe_seconds(plan, n_save: int, quiet: bool) -> float:
+    """Wall seconds of the sweep's first case simulated alone (its step control, saved
+    times and end time), compile excluded (`_phases`)."""
+    from ..batch import step_control
+    from ..simulation import simulate
+    from ._phases import Phases
+
+    scene = plan.scene
+    params = scene.resolve_params({**plan.fixed, **{k: v[0] for k, v in plan.grid.items()}})
+    phases = Phases(quiet=quiet)
+    label = "probe: the first case alone, for the sweep's time estimate"
+    with phases.phase("probe", label, split_compile=True):
+        mechanism = scene.build(params)
+        initial = scene.initial_state(params, mechanism)
+        control = step_control(scene, plan.control)
+        trajectory = simulate(mechanism, initial, plan.t_end, n_save=n_save, control=control)
+        trajectory.q.block_until_ready()
+    return phases.durations["probe_s"]
 
 
 def _summarizer(plan):

@@ -18,16 +18,22 @@ from .forces import (
 )
 from .joints import AngleDriver, Prismatic, Revolute, Weld
 from .meters import (
+    BalanceMeter,
     EnergyMeter,
     StepClock,
     add_clock,
+    balance_metered,
+    balance_metered_state,
     contact_history,
     energy_balance,
     energy_moved,
     extremes_at,
     merge_extremes,
     metered,
+    metered_balance,
     step_log,
+    unmetered_because,
+    without_balance_meter,
 )
 from .system import Mechanism
 
@@ -40,6 +46,7 @@ __all__ = [
     "AssemblyError",
     "Body",
     "CoilSpringDrive",
+    "BalanceMeter",
     "EnergyMeter",
     "StepClock",
     "ConsistentState",
@@ -57,6 +64,8 @@ __all__ = [
     "Weld",
     "Wrench",
     "add_clock",
+    "balance_metered",
+    "balance_metered_state",
     "consistent_state",
     "energy_balance",
     "energy_moved",
@@ -67,5 +76,8 @@ __all__ = [
     "onset_counts",
     "merge_extremes",
     "metered",
+    "metered_balance",
     "step_log",
+    "unmetered_because",
+    "without_balance_meter",
 ]

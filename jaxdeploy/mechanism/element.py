@@ -48,6 +48,9 @@ class AbstractElement(eqx.Module):
     """
 
     n_constraints: ClassVar[int] = 0
+    # Whether the element's constraints depend on time explicitly (a driver): it then does
+    # work on the mechanism, and `T + V + D` is not conserved (`meters.balance_metered`).
+    rheonomic: ClassVar[bool] = False
     has_memory: ClassVar[bool] = False
     has_internal_state: ClassVar[bool] = False
     switch_flags: ClassVar[tuple[str, ...]] = ()

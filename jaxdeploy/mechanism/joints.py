@@ -96,6 +96,7 @@ class AngleDriver(AbstractElement):
     angle0: float = param()
     speed: float = param(default=0.0)
     n_constraints: ClassVar[int] = 1
+    rheonomic: ClassVar[bool] = True
 
     def constraint(self, kin: Kinematics, t):
         rel = kin.angle(self.body_b) - kin.angle(self.body_a)

@@ -166,6 +166,89 @@ def metered(mechanism: Mechanism) -> Mechanism:
     return Mechanism(mechanism.bodies, elements, mechanism.ground_points)
 
 
+class BalanceMeter(AbstractElement):
+    """The energy meters of a mechanism's force elements, beside them: the elements stay as
+    they are (a clearance joint stays a `RevoluteClearance`, its contact episodes and extremes
+    logged as before) and this element keeps an `EnergyMeter` of each, whose memory it
+    updates from the same states. It adds no force, no constraint, no event and no coupling,
+    so the run steps exactly as without it. See `balance_metered`.
+
+    **Arguments:** `meters`: an `EnergyMeter` per metered element.
+    """
+
+    meters: tuple
+    has_memory: ClassVar[bool] = True
+
+    def bodies(self):
+        return ()
+
+    def coupled_bodies(self):
+        return ()
+
+    def init_memory(self, kin: Kinematics):
+        return tuple(m.init_memory(kin) for m in self.meters)
+
+    def memory_for_step(self, memory, kin: Kinematics):
+        return tuple(m.memory_for_step(x, kin) for m, x in zip(self.meters, memory, strict=True))
+
+    def memory_after_step(self, memory, kin: Kinematics, step):
+        return tuple(
+            m.memory_after_step(x, kin, step) for m, x in zip(self.meters, memory, strict=True)
+        )
+
+    def switched(self, before, after):
+        # The metered elements' own switches are seen where they are, in the mechanism.
+        return jnp.array(False)
+
+    def idealized(self):
+        return BalanceMeter(tuple(m.idealized() for m in self.meters))
+
+
+def balance_metered(mechanism: Mechanism) -> Mechanism | None:
+    """`mechanism` with a `BalanceMeter` of its force elements appended (last element), or
+    None when its energy balance cannot be computed (`unmetered_because` says why). Its
+    energies: `metered_balance`."""
+    if unmetered_because(mechanism) is not None:
+        return None
+    forces = [e for e in mechanism.elements if not e.n_constraints]
+    meter = BalanceMeter(tuple(EnergyMeter(e) for e in forces))
+    return Mechanism(mechanism.bodies, (*mechanism.elements, meter), mechanism.ground_points)
+
+
+def unmetered_because(mechanism: Mechanism) -> str | None:
+    """Why `mechanism`'s energy balance cannot be computed, or None: a rheonomic constraint
+    (a driver does work that no element meters) or a force element with continuous internal
+    states (which `EnergyMeter` cannot meter)."""
+    for e in mechanism.elements:
+        if e.rheonomic:
+            return f"a driving constraint ({type(e).__name__}) does work no element meters"
+        if not e.n_constraints and e.has_internal_state:
+            return f"{type(e).__name__} has internal states the energy meter cannot meter"
+    return None
+
+
+def balance_metered_state(mechanism: Mechanism, state: ConsistentState) -> ConsistentState:
+    """`state` (of the mechanism without the meter) for `mechanism` from `balance_metered`:
+    the same q, q̇, q̈, λ, its memory initialised with the meter's."""
+    return ConsistentState(
+        state.q, state.v, state.qdd, state.lam, mechanism.init_memory(state.q, state.v)
+    )
+
+
+def without_balance_meter(trajectory):
+    """A run of a `balance_metered` mechanism as the run of the mechanism without it: the
+    meter's memory (the last entry) taken out of the saved memory."""
+    return eqx.tree_at(lambda t: t.memory, trajectory, tuple(trajectory.memory[:-1]))
+
+
+def metered_balance(mechanism: Mechanism, q, v, memory) -> dict:
+    """`energy_balance` of a run of a `balance_metered` mechanism, from its saved `q`, `v`
+    and `memory` (the `BalanceMeter`'s memory is the last entry)."""
+    meter = mechanism.elements[-1]
+    alone = Mechanism(mechanism.bodies, meter.meters, mechanism.ground_points)
+    return energy_balance(alone, q, v, memory[-1])
+
+
 class StepClock(AbstractElement):
     """Logs accepted steps through the `"clock"` body's x coordinate (= t); see `add_clock`.
 
