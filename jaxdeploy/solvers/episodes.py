@@ -35,6 +35,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from .._tracing import traced_once
 from ..mechanism import RevoluteClearance
 
 DEFAULT_CAPACITY = 128  # episodes kept per clearance joint
@@ -111,9 +112,12 @@ def step_maximum(f, t0, t1, samples: int = SAMPLES, iterations: int = NEWTON):
 
     best = jax.lax.stop_gradient(times[k])
     refined = jax.lax.stop_gradient(jax.lax.fori_loop(0, iterations, newton, best))
-    t_star = jnp.where(f(refined) > values[k], refined, best)
-    t_star = jax.lax.stop_gradient(t_star)
-    return t_star, f(t_star), values
+    at_refined = f(refined)
+    better = at_refined > values[k]
+    t_star = jax.lax.stop_gradient(jnp.where(better, refined, best))
+    # f(t*): the refined value or the best sample's, both evaluated already (evaluating f
+    # again at t* gave the same bits and a larger program).
+    return t_star, jnp.where(better, at_refined, values[k]), values
 
 
 def simpson(values, t0, t1):
@@ -132,12 +136,15 @@ def _joint_state(mechanism, index, memory):
     return m["in_contact"] > 0.5, m["event_fraction"], m["impact_velocity"]
 
 
+@traced_once
 def _contact_at(mechanism, index, q, v, step_memory):
-    """(F_N, δ) of joint `index` at `(q, q̇)` with the step's memory of the joint."""
+    """[F_N, δ] of joint `index` at `(q, q̇)` with the step's memory of the joint (traced
+    once per program: a step evaluates it at its samples and in the Newton steps of
+    `step_maximum`, and diffrax traces the step three times)."""
     joint = mechanism.elements[index]
     kin = mechanism.kinematics(q, v)
     fn, _, geometry = joint.contact_forces(kin, step_memory)
-    return fn, geometry.penetration
+    return jnp.stack([fn, geometry.penetration])
 
 
 def _penetration_state(mechanism, index, q, v):
