@@ -195,6 +195,43 @@ def test_outputs_that_do_not_fit_in_memory_are_refused(tmp_path, capsys, monkeyp
     assert _entries(tmp_path) == []
 
 
+GRADCHECK = ["gradcheck", "slider_crank", "--output", "first_onset_time", "--params", "clearance"]
+OPTIMIZE = ["optimize", "--scene", "deploy_array"]
+
+
+@pytest.mark.parametrize(
+    "argv, what",
+    [
+        (GRADCHECK, "saved states of slider_crank (a run, its derivative and a difference run)"),
+        (OPTIMIZE, "saved states of deploy_array (a run, its derivative and the ideal reference)"),
+    ],
+)
+def test_every_command_refuses_outputs_that_do_not_fit(argv, what, tmp_path, capsys, monkeypatch):
+    from jaxdeploy.commands import _plan
+
+    monkeypatch.setattr(_plan, "available_memory", lambda: 24e9)
+    code, err = _run(capsys, *argv, "--n-save", "100000000", "--out", tmp_path / "a")
+    assert code == 2 and f"--n-save = 100000000 {what}" in err and "12 GB a run may use" in err
+    assert _entries(tmp_path) == []
+
+
+def test_fit_refuses_data_whose_states_do_not_fit(tmp_path, capsys, monkeypatch):
+    from jaxdeploy.commands import _plan
+
+    monkeypatch.setattr(_plan, "available_memory", lambda: 1e5)  # 50 kB a run may use
+    code, err = _run(capsys, "fit", DATA, "--scene", "slider_crank", "--params",
+                     "clearance=6e-4", "--out", tmp_path / "f")  # fmt: skip
+    assert code == 2 and "data times of slider_crank" in err and "thin the data" in err
+    assert _entries(tmp_path) == []
+
+
+@pytest.mark.parametrize("argv", [GRADCHECK, OPTIMIZE])
+def test_every_command_refuses_an_atol_too_loose_for_the_clearance(argv, tmp_path, capsys):
+    code, err = _run(capsys, *argv, "--atol", "1e5", "--out", tmp_path / "a")
+    assert code == 2 and "--atol = 100000 is too loose for a clearance" in err
+    assert _entries(tmp_path) == []
+
+
 def test_a_sweep_of_hours_needs_long_run(tmp_path, capsys):
     code, err = _run(
         capsys,
@@ -251,6 +288,16 @@ def test_a_second_run_into_a_held_folder_is_refused_naming_the_holder(tmp_path, 
                          "--out", out)  # fmt: skip
         assert code == 2 and "is in use by another run" in err
     assert _entries(tmp_path) == []  # the holder's staging folder and lock are gone
+
+
+def test_gradcheck_takes_its_folder_like_every_command(tmp_path, capsys):
+    from jaxdeploy._output_folder import OutputFolder
+
+    out = tmp_path / "held"
+    with OutputFolder(str(out)).claim():
+        code, err = _run(capsys, *GRADCHECK, "--out", out, "--overwrite")
+        assert code == 2 and "is in use by another run" in err
+    assert _entries(tmp_path) == []
 
 
 def test_overwrite_replaces_the_whole_folder_and_a_crash_leaves_the_old_one(

@@ -335,6 +335,7 @@ def _validate(args) -> _Job:
     _, fixed, control = scene_settings(scene, args)
     params = make_parameters(scene, args.params, fixed)
     stages = _stages(args, data)
+    _plan_fit(scene, {**fixed, **{p.name: p.guess for p in params}}, control, data)
     out = args.out or default_output_dir("fit", scene.name)
     try:
         check_output_dir(out, args.overwrite)
@@ -351,6 +352,26 @@ def _validate(args) -> _Job:
         # The default continuation applies where the user chose none (no windows, widths).
         auto_tolerance=args.dt is None and args.rtol is None,
         auto_horizons=args.horizons == "auto" and not args.window and not args.widths,
+    )
+
+
+# Runs whose states at the data's times a fit step holds at once: the run, its sensitivities
+# (forward mode, one per fitted parameter, counted as one more run) and the residuals.
+RUNS_HELD = 3
+
+
+def _plan_fit(scene, params, control, data) -> None:
+    """Refuse (`ValueError`) tolerances too loose for the start point's clearances and states
+    at the data's times that would not fit in memory (`_plan`); nothing is compiled."""
+    from . import _plan
+
+    mechanism = scene.build(params)
+    _plan.check_tolerances(mechanism, control)
+    _plan.check_memory(
+        _plan.saved_state_bytes(mechanism, len(data.t), runs=RUNS_HELD),
+        f"the {len(data.t)} data times of {scene.name} (a run's states at each, its "
+        "sensitivities and residuals)",
+        "thin the data (fewer rows)",
     )
 
 

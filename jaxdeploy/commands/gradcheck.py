@@ -107,7 +107,28 @@ def _validate(args):
         raise ValueError("--modes: a mode is given twice")
     out = args.out or default_output_dir("gradcheck", scene.name)
     check_output_dir(out, args.overwrite)
+    _plan_run(args, scene, params, control)
     return scene, params, control, out
+
+
+# Runs whose saved states a check holds at once: the run, its tangent or cotangent, and a
+# difference run beside them.
+RUNS_HELD = 3
+
+
+def _plan_run(args, scene, params, control) -> None:
+    """Refuse (`ValueError`) tolerances too loose for the scene's clearances and saved states
+    that would not fit in memory (`_plan`); building the mechanism compiles nothing."""
+    from . import _plan
+
+    mechanism = scene.build(params)
+    _plan.check_tolerances(mechanism, control)
+    _plan.check_memory(
+        _plan.saved_state_bytes(mechanism, args.n_save, runs=RUNS_HELD),
+        f"--n-save = {args.n_save} saved states of {scene.name} (a run, its derivative and a "
+        "difference run)",
+        "lower --n-save",
+    )
 
 
 # Without --t-end, an event time is checked over a horizon this much past the event (the
@@ -148,12 +169,11 @@ def _horizon(scene, params, args, control) -> float:
     return min(horizon, HORIZON_MARGIN * t_event)
 
 
-def _write(out, check, args, scene, control, t_end) -> None:
-    import os
+def _write(folder, check, args, scene, control, t_end) -> None:
+    """gradcheck.json and gradcheck.png into the run's staging folder, then moved into place
+    (`_output_folder`: an older result is replaced whole)."""
+    from ..io import atomic_write_json, run_metadata
 
-    from ..io import atomic_write_json, prepare_output_dir, run_metadata
-
-    prepare_output_dir(out, args.overwrite)
     record = {
         **check.to_json(),
         "scene_options": scene.options,
@@ -161,15 +181,26 @@ def _write(out, check, args, scene, control, t_end) -> None:
         "step_control": control.to_json(),
         "meta": run_metadata(),
     }
-    atomic_write_json(os.path.join(out, "gradcheck.json"), record)
-    check.plot(os.path.join(out, "gradcheck.png"))
+    atomic_write_json(folder.file("gradcheck.json"), record)
+    check.plot(folder.file("gradcheck.png"))
+    folder.commit()
 
 
 def run(args) -> int:
+    """validate → plan (tolerances, memory, the folder's lock) → check → write; every refusal
+    (exit 2) comes before anything is compiled or written."""
+    from . import _plan
+
     try:
         scene, params, control, out = _validate(args)
+        folder = _plan.claim_output(out, args.overwrite)
     except (ValueError, FileExistsError) as err:
         return refuse(str(err))
+    with folder:
+        return _check(args, scene, params, control, folder)
+
+
+def _check(args, scene, params, control, folder) -> int:
     from ..fit import DEFAULT_STEPS, gradient_check
 
     def progress(message):
@@ -194,7 +225,7 @@ def run(args) -> int:
     except (ValueError, RuntimeError) as err:  # output unknown or not reached, a run failed
         print(f"error: {err}", file=sys.stderr)
         return 1
-    _write(out, check, args, scene, control, t_end)
+    _write(folder, check, args, scene, control, t_end)
     print(check.table())
-    print(f"wrote {out}/gradcheck.json, gradcheck.png")
+    print(f"wrote {folder.shown}/gradcheck.json, gradcheck.png")
     return 0 if check.verdict == "agree" else 1

@@ -221,6 +221,7 @@ def run(args) -> int:
         for name, value in x0.items():  # the start must be a valid scene parameter too
             scene.resolve_params({**fixed, name: value})
         control = step_control(args, scene)
+        _plan_run(args, scene, scene.resolve_params({**fixed, **x0}), control)
         out = args.out or default_output_dir("optimize", scene.name)
         check_output_dir(out, args.overwrite)
     except (ValueError, FileExistsError) as err:
@@ -237,6 +238,26 @@ def run(args) -> int:
     began = time.perf_counter()
     with folder:
         return _optimize(args, scene, objective, bounds, fixed, x0, control, folder, began)
+
+
+# Runs whose saved states a gradient evaluation holds at once: the design's run, its
+# derivative, and the ideal reference.
+RUNS_HELD = 3
+
+
+def _plan_run(args, scene, params, control) -> None:
+    """Refuse (`ValueError`) tolerances too loose for the start design's clearances and saved
+    states that would not fit in memory (`_plan`); building the mechanism compiles nothing."""
+    from . import _plan
+
+    mechanism = scene.build(params)
+    _plan.check_tolerances(mechanism, control)
+    _plan.check_memory(
+        _plan.saved_state_bytes(mechanism, args.n_save, runs=RUNS_HELD),
+        f"--n-save = {args.n_save} saved states of {scene.name} (a run, its derivative and "
+        "the ideal reference)",
+        "lower --n-save",
+    )
 
 
 def _optimize(args, scene, objective, bounds, fixed, x0, control, folder, began) -> int:
