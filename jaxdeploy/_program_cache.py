@@ -126,6 +126,19 @@ def code_digest() -> str:
     return digest.hexdigest()
 
 
+def environment() -> str:
+    """What every entry's key starts from: the package's code digest, the libraries'
+    versions, the platform and the devices (JSON text)."""
+    return _environment()
+
+
+def trace_settings() -> dict:
+    """The JAX settings that change what a function traces to, as text."""
+    import jax
+
+    return {name: str(getattr(jax.config, name, None)) for name in _TRACE_SETTINGS}
+
+
 @functools.cache
 def _environment() -> str:
     import diffrax
@@ -196,10 +209,9 @@ def key(fn, args) -> str | None:
         if description is None:
             return None
         described.append(description)
-    settings = {name: str(getattr(jax.config, name, None)) for name in _TRACE_SETTINGS}
     record = [
         _environment(),
-        settings,
+        trace_settings(),
         on_error,
         f"{fn.__module__}:{getattr(fn, '__qualname__', repr(fn))}",
         structure,
@@ -218,7 +230,7 @@ def call(fn, *args):
     cache_key = None if where is None else key(fn, args)
     if cache_key is None:
         return fn(*args)
-    if not _safe(where):
+    if not folder_is_private(where, "program cache"):
         return fn(*args)
     path = os.path.join(where, f"{cache_key}.jaxexport")
     # Read once per process: the same `Exported` object reuses its compiled executable, where
@@ -295,6 +307,24 @@ def _compile_and_keep(exported, arrays, where):
     compiled = jax.jit(exported.call).lower(*arrays).compile()
     if getattr(_hits, "count", 0) == hits:
         _store_executable(where, compiled)
+        return compiled
+
+    # Read from JAX's cache (its entry written by an earlier process, e.g. before a change of
+    # the package's code, which changes this store's key but not the program): compiled
+    # under a name of this entry's own, which JAX's cache has not seen (the module's name is
+    # part of its key), XLA compiles it once more and the executable is kept. Without it no
+    # later process would keep one either, and each would lower the program again (and load
+    # scipy's LAPACK kernels for that). Same program, same compiler: the same code.
+    def kept(*arrays):
+        return exported.call(*arrays)
+
+    kept.__name__ = kept.__qualname__ = f"kept_{os.path.basename(where)[:16]}"
+
+    hits = getattr(_hits, "count", 0)
+    again = jax.jit(kept).lower(*arrays).compile()
+    if getattr(_hits, "count", 0) == hits:
+        _store_executable(where, again)
+        return again
     return compiled
 
 
@@ -496,10 +526,11 @@ def _load(path, cache_key: str | None = None):
 _unsafe_seen: set[str] = set()
 
 
-def _safe(where: str) -> bool:
-    """Whether the store's folder may be read: entries are pickles, so a folder another user
-    could write into (owned by someone else, or group/other-writable) is not read (a missing
-    folder is safe: `_store` creates it private to its user's umask)."""
+def folder_is_private(where: str, what: str) -> bool:
+    """Whether a cache folder of pickled entries may be read (`what` names the cache in the
+    warning): a folder another user could write into (owned by someone else, or
+    group/other-writable) is not read (a missing folder is safe: `_store` creates it private
+    to its user's umask)."""
     try:
         info = os.stat(where)
     except OSError:
@@ -510,7 +541,7 @@ def _safe(where: str) -> bool:
     if where not in _unsafe_seen:
         _unsafe_seen.add(where)
         warnings.warn(
-            f"program cache: not reading {where}: it is writable by other users (mode "
+            f"{what}: not reading {where}: it is writable by other users (mode "
             f"{info.st_mode & 0o777:o}, owner uid {info.st_uid}) and its entries are pickles; "
             f"run `chmod go-w {where}` or choose another JAXDEPLOY_CACHE_DIR",
             RuntimeWarning,

@@ -75,17 +75,22 @@ def test_second_process_traces_no_program_and_gives_identical_results(tmp_path):
 def test_executables_kept_only_when_compiled_here(tmp_path):
     """An executable JAX read from its persistent compilation cache serializes without its
     object code (read back, it fails: "NOT_FOUND: Function ... not found", jax 0.10.2): with
-    the kept executables gone but JAX's cache filled, the next process compiles from JAX's
-    cache and keeps nothing, and the one after it runs, with the same results."""
+    the kept executables gone but JAX's cache filled, the next process finds each program in
+    JAX's cache, compiles it once more under a name JAX's cache has not seen ("kept_" and
+    the entry's key) and
+    keeps that; the one after it reads them back and lowers nothing (before, no process kept
+    one again and every later process lowered each program), with the same results."""
     cache = tmp_path / "cache"
     first = _run(tmp_path, str(cache))
-    kept = list((tmp_path / "cache-programs").glob("*.executable"))
+    kept = sorted((tmp_path / "cache-programs").glob("*.executable"))
     assert kept
     for path in kept:
         path.unlink()
     second = _run(tmp_path, str(cache))
-    assert not list((tmp_path / "cache-programs").glob("*.executable"))
+    assert any(n.startswith("kept_") for n in second["traced"]), second["traced"]
+    assert sorted((tmp_path / "cache-programs").glob("*.executable")) == kept
     third = _run(tmp_path, str(cache))
+    assert not [n for n in third["traced"] if n.startswith(("kept_", "call"))], third["traced"]
     assert first["bits"] == second["bits"] == third["bits"]
 
 
