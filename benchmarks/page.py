@@ -638,14 +638,16 @@ def whole_process_section(w: dict) -> list[str]:
 # What each phase of `jaxdeploy simulate`'s summary.json measures (docs/results.md).
 SIMULATE_PHASES = {
     "start_up_s": "interpreter, imports, arguments (the wall before the phases began)",
-    "build_s": "scene build and initial state (its two assembly programs compiled or loaded)",
+    "build_s": "scene build and initial state (its assembly programs compiled or loaded; warm: "
+    "read back from the scene cache)",
     "compile_s": "tracing, lowering and compiling the run's program (cold) or loading it (warm)",
-    "integrate_s": "the run, and beside it the contact-history programs, matplotlib's import",
+    "integrate_s": "the run, and beside it the contact-history programs",
     "reference_compile_s": "the reference run's compile, in a second thread beside the run",
     "reference_s": "the reference run, in that thread (cold; warm: read from its cache)",
     "reference_wait_s": "waiting for the reference after the run",
     "outputs_s": "summary quantities, trajectory.npz",
-    "plots_s": "the figures (matplotlib)",
+    "plots_s": "waiting for the figures (drawn in a second process beside the outputs; "
+    "matplotlib's import there overlaps the run)",
 }
 
 

@@ -67,20 +67,20 @@ def _labelled(fig):
 
 @pytest.fixture
 def figures(monkeypatch):
-    """Check the axes of every figure a command saves."""
-    import jaxdeploy.analysis.deploy_array
-    import jaxdeploy.analysis.slider_crank
-    import jaxdeploy.io
+    """Check the axes of every figure a command saves: drawn in this process (the command's
+    figure process not started) to see them."""
+    import jaxdeploy.analysis.figures
+    import jaxdeploy.commands._figures
 
     problems = []
-    original = jaxdeploy.io.atomic_savefig
+    original = jaxdeploy.analysis.figures.save
 
     def checking(fig, path, **kwargs):
         problems.extend(f"{os.path.basename(path)}: {p}" for p in _labelled(fig))
         original(fig, path, **kwargs)
 
-    for module in (jaxdeploy.io, jaxdeploy.analysis.deploy_array, jaxdeploy.analysis.slider_crank):
-        monkeypatch.setattr(module, "atomic_savefig", checking)
+    monkeypatch.setattr(jaxdeploy.analysis.figures, "save", checking)
+    monkeypatch.setattr(jaxdeploy.commands._figures.FigureProcess, "start", lambda self: None)
     return problems
 
 

@@ -9,7 +9,8 @@ from typing import ClassVar
 
 class Analysis:
     """The analysis of one run of a scene: `summary()` (headline numbers, JSON-ready) and
-    `plot(out_dir)` (figures; returns the files written). This base has none; a scene's own
+    `plot(out_dir)` (figures; returns the files written), drawn from `plot_data()` by the
+    matplotlib-only `jaxdeploy.analysis.figures`. This base has none; a scene's own
     analysis subclasses it and is registered by scene name in `jaxdeploy.analysis.ANALYSES`.
 
     **Arguments:** `scene`, `params` (complete), `mechanism`, `trajectory` of the run;
@@ -30,8 +31,21 @@ class Analysis:
         self.trajectory = trajectory
         self.reference = reference
 
+    # The name of the scene's figures in `jaxdeploy.analysis.figures.DRAWINGS` (None: none).
+    figures: ClassVar[str | None] = None
+
     def summary(self) -> dict:
         return {}
 
+    def plot_data(self) -> dict:
+        """The numbers the figures show (numpy arrays, floats and dicts of them: what
+        `figures.draw(self.figures, data, out_dir)` draws, in this process or another)."""
+        return {}
+
     def plot(self, out_dir: str) -> list[str]:
-        return []
+        """The figures written into `out_dir` (the files)."""
+        if self.figures is None:
+            return []
+        from .figures import draw
+
+        return draw(self.figures, self.plot_data(), out_dir)

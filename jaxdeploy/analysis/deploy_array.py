@@ -6,11 +6,9 @@ contact forces, lock time."""
 from __future__ import annotations
 
 import functools
-import os
 
 import numpy as np
 
-from ..io import atomic_savefig
 from ..mechanism import lock_times
 from ..scenes.deploy_array import deployment_angle
 from .base import Analysis
@@ -77,7 +75,7 @@ def lock_time(mechanism, trajectory) -> float:
 
 
 class DeployArrayAnalysis(Analysis):
-    """`deploy_array_summary` and `plot_deploy_array` of a run, from its outputs
+    """`deploy_array_summary` and the figures (`deploy_array_plot_data`) of a run, from its outputs
     (`deploy_array_outputs`, computed once for both). `reference`: the ideal-joint
     counterpart's trajectory at the same saved times (`DeployArray.ideal_counterpart()`), or
     None: then the deviations from the ideal mechanism and its lock time are left out."""
@@ -91,8 +89,10 @@ class DeployArrayAnalysis(Analysis):
     def summary(self) -> dict:
         return deploy_array_summary(self.outputs, self.mechanism, self.trajectory)
 
-    def plot(self, out_dir: str) -> list[str]:
-        return plot_deploy_array(self.outputs, out_dir)
+    figures = "deploy_array"
+
+    def plot_data(self) -> dict:
+        return deploy_array_plot_data(self.outputs)
 
 
 def deploy_array_outputs(mechanism, trajectory, reference=None) -> dict:
@@ -176,89 +176,30 @@ def deploy_array_summary(outputs, mechanism, trajectory) -> dict:
     return summary
 
 
-def plot_deploy_array(outputs, out_dir) -> list[str]:
-    """Figures of a run from its `deploy_array_outputs`; the deviations from the ideal
-    mechanism only when the outputs have the reference."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def deploy_array_plot_data(outputs) -> dict:
+    """What `figures.deploy_array` draws, from a run's `deploy_array_outputs`: those, the
+    lock time to mark (the run's end when it did not lock), the panels, and each panel's
+    Welch spectrum of its interval-mean Y acceleration before and after the lock (where
+    there are more than 8 intervals), with the spectra's upper frequency [Hz]."""
     o = outputs
-    with_reference = "alpha_ideal" in o
     ts = o["t"]
     t_lock = o["lock_time"] if np.isfinite(o["lock_time"]) else ts[-1]
-    files = []
-
-    def save(fig, name):
-        fig.tight_layout()
-        path = os.path.join(out_dir, name)
-        atomic_savefig(fig, path, dpi=130)
-        plt.close(fig)
-        files.append(path)
-
-    # The angle, with the ideal mechanism's and the deviation from it below when there is
-    # a reference; the lock marked on the lower axes.
-    rows = 2 if with_reference else 1
-    fig, axes = plt.subplots(rows, 1, figsize=(7, 3 * rows), sharex=True, squeeze=False)
-    ax1 = axes[0, 0]
-    ax1.plot(ts, np.degrees(o["alpha"]), label="clearance joints")
-    if with_reference:
-        ax1.plot(ts, np.degrees(o["alpha_ideal"]), "k--", lw=1, label="ideal joints")
-        axes[1, 0].plot(ts, np.degrees(o["alpha"] - o["alpha_ideal"]), lw=0.8)
-        axes[1, 0].set_ylabel("α − α_ideal [deg]")
-    ax1.set_ylabel("deployment angle α [deg]")
-    ax1.legend()
-    axes[-1, 0].axvline(t_lock, color="grey", ls=":", label="lock")
-    axes[-1, 0].set_xlabel("time [s]")
-    for ax in axes[:, 0]:
-        ax.grid(alpha=0.3)
-    save(fig, "deployment_angle.png")
-
-    if with_reference:
-        fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
-        for row, panel in enumerate(PANELS):
-            for col, axis_name in enumerate("XY"):
-                ax = axes[row, col]
-                for where, style in (("centre", "-"), ("tip", "--")):
-                    d = o[f"{panel}_{where}_deviation"][:, col] * 1e6
-                    ax.plot(ts, d, style, lw=0.7, label=where)
-                ax.set_title(f"{panel}: {axis_name} displacement deviation")
-                ax.set_ylabel("deviation [µm]")
-                ax.grid(alpha=0.3)
-                ax.legend(fontsize=8)
-        for ax in axes[-1]:
-            ax.set_xlabel("time [s]")
-        save(fig, "panel_displacement_deviation.png")
-
-    fig, axes = plt.subplots(2, 2, figsize=(10, 6))
-    for row, panel in enumerate(PANELS):
-        acc_y = o[f"{panel}_acceleration"][:, 1]
-        axes[row, 0].plot(ts, acc_y, lw=0.5)
-        axes[row, 0].set_title(f"{panel}: Y acceleration of the centre")
-        axes[row, 0].set_ylabel("a_y [m/s²]")
-        axes[row, 0].set_xlabel("time [s]")
+    spectra = {}
+    for panel in PANELS:
         mean_acc_y, starts = o[f"{panel}_mean_acceleration"][:, 1], ts[:-1]
-        for phase, mask in (("unfolding", starts < t_lock), ("post-lock", starts >= t_lock)):
-            if mask.sum() > 8:
-                f, psd = welch_psd(starts[mask], mean_acc_y[mask], SPECTRUM_SEGMENT)
-                axes[row, 1].semilogy(f, psd + 1e-30, lw=0.7, label=phase)
-        axes[row, 1].set_xlim(0, min(500.0, 0.5 / float(ts[1] - ts[0])))
-        axes[row, 1].set_title(f"{panel}: Welch spectrum, interval-mean Y acc.")
-        axes[row, 1].set_ylabel("PSD of a_y [(m/s²)²/Hz]")
-        axes[row, 1].set_xlabel("frequency [Hz]")
-        axes[row, 1].legend(fontsize=8)
-    save(fig, "panel_acceleration_spectra.png")
-
-    if o["joints"]:
-        fig, axes = plt.subplots(
-            len(o["joints"]), 1, figsize=(7, 2.6 * len(o["joints"])), squeeze=False, sharex=True
-        )
-        for ax, (owner, h) in zip(axes[:, 0], o["joints"].items(), strict=True):
-            ax.plot(ts, np.asarray(h["normal_force"]), lw=0.6)
-            ax.set_title(f"{owner} hinge: normal contact force")
-            ax.set_ylabel("normal force [N]")
-            ax.grid(alpha=0.3)
-        axes[-1, 0].set_xlabel("time [s]")
-        save(fig, "contact_forces.png")
-    return files
+        spectra[panel] = {
+            phase: welch_psd(starts[mask], mean_acc_y[mask], SPECTRUM_SEGMENT)
+            for phase, mask in (("unfolding", starts < t_lock), ("post-lock", starts >= t_lock))
+            if mask.sum() > 8
+        }
+    joints = {
+        owner: {"normal_force": np.asarray(h["normal_force"])} for owner, h in o["joints"].items()
+    }
+    return {
+        **{k: v for k, v in o.items() if k != "joints"},
+        "t_lock": float(t_lock),
+        "panels": PANELS,
+        "spectra": spectra,
+        "spectrum_f_max": min(500.0, 0.5 / float(ts[1] - ts[0])),
+        "joints": joints,
+    }

@@ -30,11 +30,13 @@ SUMMARY_KEYS = (
     (
         "phases",
         "s",
-        "wall time of each phase: build_s (mechanism, initial state), compile_s (of the "
+        "wall time of each phase: build_s (mechanism, initial state; read back from the "
+        "scene cache when an earlier run built the same scene and parameters), compile_s (of the "
         "run), integrate_s, reference_compile_s and reference_s (the ideal-joint reference "
         "run, deploy_array without --no-reference, made in a second thread beside the run: "
         "they overlap compile_s and integrate_s), reference_wait_s (waiting for it after the "
-        "run), outputs_s (summary quantities, trajectory.npz), plots_s",
+        "run), outputs_s (summary quantities, trajectory.npz; the figures are drawn meanwhile "
+        "in a second process), plots_s (waiting for the figures after that)",
     ),
     ("params", "", "every scene parameter of the run, SI units (`jaxdeploy scenes SCENE`)"),
     ("scene_options", "", "the scene's options (constructor keywords)"),

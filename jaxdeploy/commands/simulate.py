@@ -138,15 +138,34 @@ def _duration(seconds: float) -> str:
 def run(args) -> int:
     """validate → build → plan → run and write; every refusal (exit 2) comes before the
     output folder is taken and before the run is compiled: a bad run leaves nothing behind."""
-    from ..mechanism import AssemblyError
-    from . import _plan
-
     try:
         scene, params, control, t_end = _validate(args)
     except ValueError as err:
         return refuse(str(err))
     out = args.out or _default_out(args)
+    drawing = _start_figures(scene)
+    try:
+        return _build_and_run(args, scene, params, control, t_end, out, drawing)
+    finally:
+        drawing.close()
 
+
+def _start_figures(scene):
+    """The figure process of the run (`_figures`), started now when the scene's analysis
+    draws figures, so that its matplotlib import overlaps the build and the run."""
+    from ..analysis import analysis_class
+    from ._figures import FigureProcess
+
+    drawing = FigureProcess()
+    if analysis_class(scene).figures is not None:
+        drawing.start()
+    return drawing
+
+
+def _build_and_run(args, scene, params, control, t_end, out, drawing) -> int:
+    """build → plan → run and write, the figures drawn by `drawing`."""
+    from ..mechanism import AssemblyError
+    from . import _plan
     from ._phases import Phases
 
     phases = Phases(quiet=args.quiet)
@@ -154,13 +173,9 @@ def run(args) -> int:
         with phases.phase(
             "build", f"{scene.name}: build the mechanism, assemble the initial state"
         ):
-            mechanism = scene.build(params)
-            # Plan before assembling: the assembly compiles its Newton iteration.
-            try:
-                _plan_run(args, scene, mechanism, control)
-            except ValueError as err:
-                return refuse(str(err))
-            initial = scene.initial_state(params, mechanism)
+            mechanism, initial = _build(args, scene, params, control, phases)
+    except _Refused as refused:
+        return refuse(str(refused))
     except (ValueError, AssemblyError) as err:
         return refuse(f"scene {scene.name!r} with these parameters: {err}")
     try:
@@ -168,7 +183,39 @@ def run(args) -> int:
     except FileExistsError as err:
         return refuse(str(err))
     with folder:
-        return _simulate(args, scene, params, control, t_end, mechanism, initial, folder, phases)
+        return _simulate(
+            args, scene, params, control, t_end, mechanism, initial, folder, phases, drawing
+        )
+
+
+class _Refused(ValueError):
+    """A refusal of the plan (its message is the whole line)."""
+
+
+def _build(args, scene, params, control, phases):
+    """`(mechanism, initial_state)` of the run: read back from the scene cache when an
+    earlier run built the same scene with the same parameters (`_scene_cache`), else built,
+    planned (before the assembly compiles its Newton iteration) and assembled. The plan is
+    checked on a cached mechanism too: it depends on the command's other flags."""
+    from . import _scene_cache
+
+    def assemble(mechanism):
+        try:
+            _plan_run(args, scene, mechanism, control)
+        except ValueError as err:
+            raise _Refused(str(err)) from None
+        return scene.initial_state(params, mechanism)
+
+    mechanism, initial, source = _scene_cache.built(
+        scene, params, lambda: scene.build(params), assemble
+    )
+    if source == "cache":
+        try:
+            _plan_run(args, scene, mechanism, control)
+        except ValueError as err:
+            raise _Refused(str(err)) from None
+        phases.say("  the mechanism and its initial state from the scene cache")
+    return mechanism, initial
 
 
 def _validate(args):
@@ -274,26 +321,24 @@ class _ReferenceBeside:
         return run
 
 
-def _while_running(mechanism, trajectory, analysis_type) -> dict:
+def _while_running(mechanism, trajectory) -> dict:
     """Work that needs the run's arrays' shapes but not their values, done while the run is
-    under way: the programs of the contact histories the analysis evaluates (traced and
-    compiled now, run again on the result later), matplotlib's import, and the run's
-    metadata (its git query is a subprocess). **Returns:** `run_metadata()`."""
-    from ..analysis import Analysis, clearance_joint_history
+    under way: the programs of the contact histories the analysis evaluates (read back or
+    traced and compiled now, run again on the result later) and the run's metadata (its git
+    query is a subprocess; matplotlib's import is the figure process's). **Returns:**
+    `run_metadata()`."""
+    from ..analysis import clearance_joint_history
     from ..io import run_metadata
     from ..mechanism import RevoluteClearance
 
-    if analysis_type.plot is not Analysis.plot:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot  # noqa: F401
     if mechanism.find(RevoluteClearance):
         clearance_joint_history(mechanism, trajectory)
     return run_metadata()
 
 
-def _simulate(args, scene, params, control, t_end, mechanism, initial, folder, phases) -> int:
+def _simulate(
+    args, scene, params, control, t_end, mechanism, initial, folder, phases, drawing
+) -> int:
     import jax.numpy as jnp
 
     from .. import _program_cache
@@ -340,7 +385,7 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, folder, p
             beside.start()  # if the program cache did not (off, or the run not cacheable)
         energy, trajectory = _energy_of(mechanism, metered, trajectory)
         # JAX has dispatched the run and returned: meanwhile, what does not need its result.
-        versions = _while_running(mechanism, trajectory, analysis_type)
+        versions = _while_running(mechanism, trajectory)
         trajectory.q.block_until_ready()
 
     summary = {
@@ -355,6 +400,9 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, folder, p
         phases.add("reference_wait_s", time.time() - waited)
     analysis = analysis_type(scene, params, mechanism, trajectory, reference)
     with phases.phase("outputs", "outputs: summary quantities, plausibility, trajectory.npz"):
+        if analysis.figures is not None:
+            # Drawn in the figure process while this one writes the other files.
+            drawing.send(analysis.figures, analysis.plot_data(), folder.staging)
         quantities = analysis.summary()
         checks = plausibility_checks(mechanism, trajectory, energy()) if trajectory.ok else []
         summary["status"] = verdict(trajectory, checks)
@@ -376,8 +424,8 @@ def _simulate(args, scene, params, control, t_end, mechanism, initial, folder, p
             text = episodes_csv(mechanism, trajectory)
             atomic_write_bytes(folder.file("episodes.csv"), text.encode())
             written.append("episodes.csv")
-    with phases.phase("plots"):
-        figures = [os.path.basename(f) for f in analysis.plot(folder.staging)]
+    with phases.phase("plots", "plots: waiting for the figures"):
+        figures = [os.path.basename(f) for f in drawing.files()]
     summary["phases"] = dict(phases.durations)
     summary["wall_time_s"] = phases.total()
     summary["units"] = units_of(summary)

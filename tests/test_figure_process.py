@@ -1,0 +1,77 @@
+"""The figure process of `jaxdeploy simulate` (jaxdeploy/commands/_figures.py): the figure
+module imports neither JAX nor the package, the process draws a scene's figures from plain
+numbers and writes the files the command lists, a failure is raised with the process's
+message, and a process that was sent nothing ends without writing. Counts and files, never
+times."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from jaxdeploy.commands._figures import FIGURES_PY, FigureProcess
+
+
+def _slider_crank_data(n=50):
+    angle = np.linspace(0.0, 720.0, n)
+    orbit = 4e-4 * np.stack([np.cos(np.radians(angle)), np.sin(np.radians(angle))], axis=1)
+    return {
+        "crank_angle": angle,
+        "slider_acceleration": np.sin(np.radians(angle)),
+        "slider_acceleration_ideal": np.cos(np.radians(angle)),
+        "clearance": 5e-4,
+        "joints": [{"eccentricity": orbit, "normal_force": np.abs(np.sin(angle))}],
+    }
+
+
+def test_the_figure_module_imports_no_jax_and_no_package():
+    code = (
+        "import runpy, sys; runpy.run_path(sys.argv[1]); import json; "
+        "print(json.dumps([m for m in ('jax', 'jaxdeploy', 'diffrax', 'equinox', 'scipy') "
+        "if m in sys.modules]))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-P", "-c", code, FIGURES_PY], capture_output=True, text=True, check=True
+    )
+    assert json.loads(done.stdout) == []
+
+
+def test_the_process_draws_the_figures_it_is_sent(tmp_path):
+    drawing = FigureProcess()
+    drawing.start()
+    drawing.send("slider_crank", _slider_crank_data(), str(tmp_path))
+    files = drawing.files()
+    drawing.close()
+    names = sorted(p.rsplit("/", 1)[-1] for p in files)
+    assert names == ["journal_orbit_contact_force.png", "slider_acceleration.png"]
+    for path in files:
+        with open(path, "rb") as f:
+            assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == names  # no temporary file left
+
+
+def test_a_failed_drawing_raises_with_its_message(tmp_path):
+    drawing = FigureProcess()
+    drawing.start()
+    broken = {**_slider_crank_data(), "crank_angle": np.zeros(3)}  # lengths differ
+    drawing.send("slider_crank", broken, str(tmp_path))
+    with pytest.raises(RuntimeError, match="figure process"):
+        drawing.files()
+    drawing.close()
+
+
+def test_a_process_sent_nothing_ends_without_writing(tmp_path):
+    drawing = FigureProcess()
+    drawing.start()
+    process = drawing._process
+    drawing.close()
+    assert process.poll() is not None
+    assert not list(tmp_path.iterdir())
+
+
+def test_without_a_process_the_figures_are_drawn_here(tmp_path):
+    drawing = FigureProcess()  # never started
+    drawing.send("slider_crank", _slider_crank_data(), str(tmp_path))
+    assert len(drawing.files()) == 2 and len(list(tmp_path.glob("*.png"))) == 2
