@@ -43,6 +43,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._tracing import traced_once
 from ..mechanism import extremes_at, merge_extremes
 from .episodes import DEFAULT_CAPACITY, init_log, log_step
 from .term import MechanismTerm, mechanism_of
@@ -132,9 +133,14 @@ class TrackExtremes(dfx.AbstractWrappedSolver):
         return y1, y_error, dense_info, TrackedState(inner, extremes, episodes), result
 
 
+@traced_once
 def _motion(dense, t):
     """`(q, q̇, memory)` of a dense output at `t`: its `motion` (no acceleration solve) where
-    it has one, else its `evaluate` (whose q̈ is left unused)."""
+    it has one, else its `evaluate` (whose q̈ is left unused). Traced once per program: a
+    step evaluates it at its midpoint and, for each clearance joint in contact, at the
+    episode log's samples and Newton steps (`episodes.step_maximum`), each in each of
+    diffrax's three traces of the step; the Runge–Kutta interpolant was a third of tracing
+    slider_crank's run."""
     if hasattr(dense, "motion"):
         return dense.motion(t)
     y = dense.evaluate(t)
