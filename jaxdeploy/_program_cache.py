@@ -283,6 +283,13 @@ def _executable(cache_key, path, exported, arrays):
         from jaxlib import lapack
 
         lapack.prepare_lapack_call("getrf_ffi", np.float64)
+    if jax.device_count() > 1:
+        # A kept executable is read back onto every device of the process: a one-device
+        # program then fails with "Expected args to execute_sharded_on_local_devices to have
+        # 4 shards" (jax 0.10.2, 4 forced host devices: the sweep's probe). Compiled, not kept.
+        compiled = jax.jit(exported.call).lower(*arrays).compile()
+        _compiled[cache_key] = compiled
+        return compiled
     where = _executable_path(path)
     began = time.time()
     compiled = _load_executable(where)
@@ -355,7 +362,7 @@ class _Kept:
         try:
             return self.compiled(*arrays)
         except jax.errors.JaxRuntimeError as err:
-            if "NOT_FOUND" not in str(err):
+            if "NOT_FOUND" not in str(err) and "shards" not in str(err):
                 raise
             warnings.warn(
                 f"discarding the kept compiled program {self.where}, which cannot run ({err}); "
