@@ -36,6 +36,7 @@ import os
 import sys
 import time
 from collections.abc import Callable, Mapping
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -199,7 +200,62 @@ def sweep(
       (tests of resume).
 
     **Returns:** the manifest (a dict).
+
+    Stages: `_setup` (every argument and case checked, the definition) → `_open_manifest`
+    (resume or new) → `_chunks_to_run` → per chunk `_run_chunk` → `_store_chunk`.
     """
+    setup = _setup(scene, grid, t_end, n_save, fixed, control, chunk_size, policy, features)
+    setup.definition["summary"] = summarize is not None
+    manifest = _open_manifest(out_dir, setup, resume, seed)
+    todo = _chunks_to_run(out_dir, manifest, setup)
+    run = batch_function(
+        scene,
+        setup.varied,
+        setup.shared,
+        setup.t_end,
+        setup.ts,
+        control=setup.control,
+        evaluate=_wrap(evaluate),
+        sharding=setup.sharding,
+        **_policy_options(setup.policy),
+    )
+    bar = _progress(
+        progress, setup.n_cases, sum(c["stop"] - c["start"] for c in manifest["chunks"])
+    )
+    for count, k in enumerate(todo):
+        if stop_after_chunks is not None and count >= stop_after_chunks:
+            raise KeyboardInterrupt(f"sweep stopped after {count} chunks (stop_after_chunks)")
+        record, arrays = _run_chunk(run, setup, k, summarize, save_trajectories)
+        _store_chunk(out_dir, manifest, record, arrays)
+        if bar is not None:
+            bar.update(record["stop"] - record["start"])
+    if bar is not None:
+        bar.close()
+    return manifest
+
+
+class _Setup(NamedTuple):
+    """A sweep's checked settings: its end time, saved times `ts`, step control, parsed
+    policy, number of cases, the cases' parameter `table` split into `varied` names and
+    `shared` values, the devices' `sharding`, the chunk size and the `definition` (what
+    --resume compares)."""
+
+    t_end: float
+    ts: jax.Array
+    control: StepControl
+    policy: dict
+    n_cases: int
+    table: dict
+    varied: tuple
+    shared: dict
+    sharding: object
+    chunk_size: int
+    definition: dict
+
+
+def _setup(scene, grid, t_end, n_save, fixed, control, chunk_size, policy, features) -> _Setup:
+    """Validate the sweep's arguments and every case (names, ranges) before anything runs;
+    a bad one raises `ValueError` naming it."""
     t_end = scene.default_t_end if t_end is None else float(t_end)
     check_positive("t_end", t_end, "s")
     if not (isinstance(n_save, int) and not isinstance(n_save, bool) and n_save >= 2):
@@ -210,7 +266,6 @@ def sweep(
     parsed_policy = parse_policy(policy)
     cases = grid_cases(grid)
     n_cases = len(next(iter(cases.values())))
-    # Validate every case before anything runs (names, ranges), and split varied names.
     table, varied, shared = stack_cases(scene, cases, fixed)
     if not varied:  # one case (or copies): still trace the first grid name
         first = next(iter(grid))
@@ -220,10 +275,26 @@ def sweep(
     definition = _definition(
         scene, grid, fixed, t_end, n_save, control, chunk_size, features, parsed_policy
     )
-    definition["summary"] = summarize is not None
-    manifest_path = os.path.join(out_dir, MANIFEST)
-    writer = jax.process_index() == 0
+    return _Setup(
+        t_end=t_end,
+        ts=jnp.linspace(0.0, t_end, n_save),
+        control=control,
+        policy=parsed_policy,
+        n_cases=n_cases,
+        table=table,
+        varied=tuple(varied),
+        shared=shared,
+        sharding=sharding,
+        chunk_size=chunk_size,
+        definition=definition,
+    )
 
+
+def _open_manifest(out_dir: str, setup: _Setup, resume: bool, seed) -> dict:
+    """The manifest of the sweep in `out_dir`: the one there (with `resume`, when it was
+    defined as `setup` is; else refused), or a new one (for an empty or missing folder;
+    written with the first finished chunk)."""
+    manifest_path = os.path.join(out_dir, MANIFEST)
     if os.path.exists(manifest_path):
         if not resume:
             raise FileExistsError(
@@ -235,107 +306,103 @@ def sweep(
         manifest["definition"].setdefault("policy", {"kind": "all"})
         # ... and those written before per-case summaries were stored had none.
         manifest["definition"].setdefault("summary", False)
-        if manifest["definition"] != definition:
+        if manifest["definition"] != setup.definition:
             raise ValueError(
                 f"--resume: the sweep in {out_dir!r} was defined differently: "
-                + "; ".join(_differences(manifest["definition"], definition))
+                + "; ".join(_differences(manifest["definition"], setup.definition))
                 + "; resume it with the same settings, or start a new sweep in another --out"
             )
-    else:
-        if os.path.isdir(out_dir) and os.listdir(out_dir):
-            raise FileExistsError(
-                f"output folder {out_dir!r} is not empty and holds no sweep manifest; choose "
-                "another --out"
-            )
-        check_output_dir(out_dir, overwrite=False)  # a file in the way, a read-only folder
-        manifest = {
-            "definition": definition,
-            "n_cases": n_cases,
-            "varied": list(varied),
-            "params": {k: float(v) for k, v in shared.items()},
-            "seed": seed,
-            "devices": [str(d) for d in jax.devices()],
-            "process_count": jax.process_count(),
-            "versions": run_metadata(),
-            "chunks": [],
-        }
-        # Written with the first finished chunk, not now: a sweep that fails before finishing
-        # one (a case the scene cannot assemble, an interrupt while compiling) leaves no
-        # manifest behind to block the corrected rerun.
+        return manifest
+    if os.path.isdir(out_dir) and os.listdir(out_dir):
+        raise FileExistsError(
+            f"output folder {out_dir!r} is not empty and holds no sweep manifest; choose "
+            "another --out"
+        )
+    check_output_dir(out_dir, overwrite=False)  # a file in the way, a read-only folder
+    # Written with the first finished chunk, not now: a sweep that fails before finishing
+    # one (a case the scene cannot assemble, an interrupt while compiling) leaves no
+    # manifest behind to block the corrected rerun.
+    return {
+        "definition": setup.definition,
+        "n_cases": setup.n_cases,
+        "varied": list(setup.varied),
+        "params": {k: float(v) for k, v in setup.shared.items()},
+        "seed": seed,
+        "devices": [str(d) for d in jax.devices()],
+        "process_count": jax.process_count(),
+        "versions": run_metadata(),
+        "chunks": [],
+    }
 
+
+def _chunks_to_run(out_dir: str, manifest: dict, setup: _Setup) -> list[int]:
+    """The chunks not yet done (recorded in the manifest with their file present); the
+    manifest keeps only the done ones."""
     done = {c["index"] for c in manifest["chunks"] if _chunk_done(out_dir, c)}
     manifest["chunks"] = [c for c in manifest["chunks"] if c["index"] in done]
-    n_chunks = math.ceil(n_cases / chunk_size)
-    todo = [k for k in range(n_chunks) if k not in done]
-    ts = jnp.linspace(0.0, t_end, n_save)
-    run = batch_function(
-        scene,
-        varied,
-        shared,
-        t_end,
-        ts,
-        control=control,
-        evaluate=_wrap(evaluate),
-        sharding=sharding,
-        **_policy_options(parsed_policy),
-    )
-    bar = _progress(progress, n_cases, sum(c["stop"] - c["start"] for c in manifest["chunks"]))
-    for count, k in enumerate(todo):
-        if stop_after_chunks is not None and count >= stop_after_chunks:
-            raise KeyboardInterrupt(f"sweep stopped after {count} chunks (stop_after_chunks)")
-        start, stop = k * chunk_size, min((k + 1) * chunk_size, n_cases)
-        index = np.arange(start, stop)
-        padded = np.concatenate([index, np.full(chunk_size - len(index), stop - 1)])
-        began = time.perf_counter()
-        inputs = tuple(_place(table[name][padded], sharding) for name in varied)
-        trajectory, feats = run(inputs)
-        trajectory, feats = _gather((trajectory, feats))
-        n = len(index)
-        arrays = {
-            "case": index,
-            "result": np.asarray(trajectory.result._value)[:n],
-            "num_steps": np.asarray(trajectory.stats["num_accepted_steps"])[:n],
-            "num_rejected": np.asarray(trajectory.stats["num_rejected_steps"])[:n],
-            **{f"param_{name}": table[name][index] for name in table},
-            **{f"feature_{name}": np.asarray(v)[:n] for name, v in feats.items()},
-        }
-        if summarize is not None:
-            arrays["summary"] = np.array(
-                [
-                    strict_json(
-                        summarize(
-                            {name: float(table[name][i]) for name in table},
-                            jax.tree.map(lambda leaf, j=j: leaf[j], trajectory),
-                        )
+    n_chunks = math.ceil(setup.n_cases / setup.chunk_size)
+    return [k for k in range(n_chunks) if k not in done]
+
+
+def _run_chunk(run, setup: _Setup, k: int, summarize, save_trajectories: bool):
+    """Run chunk `k` (padded to the chunk size with copies of its last case); **returns**
+    its manifest record and the arrays of its file."""
+    table, chunk_size = setup.table, setup.chunk_size
+    start, stop = k * chunk_size, min((k + 1) * chunk_size, setup.n_cases)
+    index = np.arange(start, stop)
+    padded = np.concatenate([index, np.full(chunk_size - len(index), stop - 1)])
+    began = time.perf_counter()
+    inputs = tuple(_place(table[name][padded], setup.sharding) for name in setup.varied)
+    trajectory, feats = run(inputs)
+    trajectory, feats = _gather((trajectory, feats))
+    n = len(index)
+    arrays = {
+        "case": index,
+        "result": np.asarray(trajectory.result._value)[:n],
+        "num_steps": np.asarray(trajectory.stats["num_accepted_steps"])[:n],
+        "num_rejected": np.asarray(trajectory.stats["num_rejected_steps"])[:n],
+        **{f"param_{name}": table[name][index] for name in table},
+        **{f"feature_{name}": np.asarray(v)[:n] for name, v in feats.items()},
+    }
+    if summarize is not None:
+        arrays["summary"] = np.array(
+            [
+                strict_json(
+                    summarize(
+                        {name: float(table[name][i]) for name in table},
+                        jax.tree.map(lambda leaf, j=j: leaf[j], trajectory),
                     )
-                    for j, i in enumerate(index)
-                ]
-            )
-        if save_trajectories:
-            arrays.update(t=np.asarray(ts), q=trajectory.q[:n], v=trajectory.v[:n])
-        record = {
-            "index": k,
-            "file": f"chunk_{k:05d}.npz",
-            "start": int(start),
-            "stop": int(stop),
-            "failed": int(np.sum(arrays["result"] != 0)),
-            "wall_time_s": time.perf_counter() - began,
-        }
-        # Every process holds the gathered chunk and keeps the same manifest (so each returns
-        # the same account of the sweep); only process 0 writes.
-        if writer and not os.path.exists(manifest_path):  # first chunk: define the sweep first
-            atomic_write_json(manifest_path, manifest)
-        if writer:
-            atomic_write_npz(os.path.join(out_dir, record["file"]), **arrays)
-        manifest["chunks"].append(record)
-        manifest["chunks"].sort(key=lambda c: c["index"])
-        if writer:
-            atomic_write_json(manifest_path, manifest)
-        if bar is not None:
-            bar.update(n)
-    if bar is not None:
-        bar.close()
-    return manifest
+                )
+                for j, i in enumerate(index)
+            ]
+        )
+    if save_trajectories:
+        arrays.update(t=np.asarray(setup.ts), q=trajectory.q[:n], v=trajectory.v[:n])
+    record = {
+        "index": k,
+        "file": f"chunk_{k:05d}.npz",
+        "start": int(start),
+        "stop": int(stop),
+        "failed": int(np.sum(arrays["result"] != 0)),
+        "wall_time_s": time.perf_counter() - began,
+    }
+    return record, arrays
+
+
+def _store_chunk(out_dir: str, manifest: dict, record: dict, arrays: dict) -> None:
+    """Write a finished chunk's file, then record it in the manifest (both atomically: a
+    chunk counts as done only once both are there). Every process keeps the same manifest
+    (so each returns the same account of the sweep); only process 0 writes."""
+    writer = jax.process_index() == 0
+    manifest_path = os.path.join(out_dir, MANIFEST)
+    if writer and not os.path.exists(manifest_path):  # first chunk: define the sweep first
+        atomic_write_json(manifest_path, manifest)
+    if writer:
+        atomic_write_npz(os.path.join(out_dir, record["file"]), **arrays)
+    manifest["chunks"].append(record)
+    manifest["chunks"].sort(key=lambda c: c["index"])
+    if writer:
+        atomic_write_json(manifest_path, manifest)
 
 
 def _differences(old, new, where: str = "") -> list[str]:
