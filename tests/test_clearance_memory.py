@@ -226,3 +226,40 @@ def test_impact_velocity_rule_on_a_contact_driven_in(rule):
 def test_unknown_impact_velocity_rule_is_refused_with_the_valid_ones():
     with pytest.raises(ValueError, match="onset, running_max"):
         _driven_joint("peak")
+
+
+def test_onset_rule_force_is_continuous_at_a_rough_contact_separation():
+    """A rough law pushes below its onset level; the memory's switch out of contact at a step
+    end must not switch that force off (a jump at an instant that moves with the parameters:
+    derivatives through the run would miss its saltation term). A journal receding through
+    the level: the net normal force with the memory before and after the step that ends just
+    past the separation, at the same state, is the same; and with v⁻ held the force is the
+    law's F_e(δ)(1 + χ δ̇/v⁻) (computed here from the law's parts)."""
+    from jaxdeploy.contact import LankaraniNikravesh, RoughElastic
+    from jaxdeploy.mechanism import Body, Mechanism, RevoluteClearance
+
+    sigma, v_minus, rate = 2e-6, 0.05, -0.04  # m, m/s, m/s (receding)
+    law = LankaraniNikravesh(RoughElastic(1e10, sigma), 0.9)
+    joint = RevoluteClearance("ground", "B", "journal", "c", clearance=DRIVEN_C,
+                              journal_radius=5e-3, normal=law)  # fmt: skip
+    mech = Mechanism([Body("journal", 1.0, 1e-5, {"c": (0.0, 0.0)})], [joint],
+                     ground_points={"B": (0.0, 0.0)})  # fmt: skip
+    level = float(law.elastic.onset_penetration())
+
+    def state(delta):
+        return mech.kinematics(jnp.array([DRIVEN_C + delta, 0.0, 0.0]), jnp.array([rate, 0.0, 0.0]))
+
+    h = 1e-6  # s: the step from δ just above the level to just below it
+    inside = {**joint.init_memory(state(level + 1e-9)), "in_contact": jnp.asarray(1.0),
+              "impact_velocity": jnp.asarray(v_minus)}  # fmt: skip
+    after = joint.memory_after_step(inside, state(level + rate * h), h)
+    assert float(after["in_contact"]) == 0.0
+    end = state(level + rate * h)
+    before_switch = float(joint.contact_forces(end, inside)[0])
+    after_switch = float(joint.contact_forces(end, after)[0])
+    elastic = float(law.elastic.force(level + rate * h))
+    # The tail this is about: a few % of the force one σ deeper.
+    assert elastic > 0.01 * float(law.elastic.force(level + sigma))
+    expected = elastic * (1 + float(law.chi()) * rate / v_minus)
+    assert before_switch == pytest.approx(expected, rel=1e-9)
+    assert after_switch == pytest.approx(before_switch, rel=1e-12)
