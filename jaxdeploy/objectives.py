@@ -26,6 +26,8 @@ Features (all pure JAX in the channels; `ts` and the windows are concrete):
 * `peak_contact_force`: (mean_i F_i^p)^{1/p} over saved samples of a joint's normal force [N].
 * `lock_time`, `first_onset_time`: the run's own located event times [s] (`Scene.events`),
   differentiable by the implicit-function theorem (panel1 for the root latch's lock).
+* `max_contact_force` [N]: a joint's largest normal force over the run, maximised within each
+  contact step (`Scene.episode_outputs`), differentiable by the envelope theorem.
 
 `Objective` composes them: J = Σ_i w_i ℓ_i with ℓ_i = ln f_i for the positive features and
 ℓ = `log_decay` (already a logarithm) for the decay, so every term is dimensionless and a weight
@@ -268,6 +270,14 @@ def first_onset_time(dep: Deployment, panel: str):
     return dep.event(f"{panel}_first_onset_time")
 
 
+def max_contact_force(dep: Deployment, panel: str):
+    """The largest net normal force [N] of the clearance joint owned by `panel` over the run,
+    maximised within every contact step on its dense output (`Scene.episode_outputs`: exact
+    between saved times, differentiable by the envelope theorem), unlike
+    `peak_contact_force`'s smoothed maximum over saved samples."""
+    return dep.event(f"{panel}_peak_force")
+
+
 FEATURES = {
     "log_decay": log_decay,
     "settling_time": settling_time,
@@ -277,6 +287,7 @@ FEATURES = {
     "peak_contact_force": peak_contact_force,
     "lock_time": lock_time,
     "first_onset_time": first_onset_time,
+    "max_contact_force": max_contact_force,
 }
 # ln is taken of these (positive) features in a composite objective; log_decay is already one.
 _ALREADY_LOG = {"log_decay"}

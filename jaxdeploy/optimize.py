@@ -192,7 +192,10 @@ class DesignProblem:
             )
         mechanism = self.scene.build(params)
         channels = self.scene.channels(mechanism, trajectory)
-        events = self.scene.events(mechanism, trajectory)
+        events = {
+            **self.scene.events(mechanism, trajectory),
+            **self.scene.episode_outputs(mechanism, trajectory),
+        }
         return Deployment(self.ts, self.lock_time, channels, self.ideal, events), trajectory
 
     def evaluate(self, x: Mapping):

@@ -73,3 +73,22 @@ def test_gradcheck_command_on_the_first_onset(tmp_path, capsys):
     }
     assert (out / "gradcheck.png").stat().st_size > 0
     assert "clearance: AD" in printed and "verdict: agree" in printed
+
+
+def test_event_steps_say_in_which_replayed_step_each_event_fell():
+    """A replayed pair is flagged when an event changed step: the index of the step (its end in
+    the replayed step ends) holding each located event, −1 for one not reached; counts and
+    channels are not events."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from jaxdeploy.fit._gradcheck import event_steps
+
+    step_ends = np.array([0.1, 0.2, 0.3, np.inf])
+    outputs = {
+        "lock_time": jnp.asarray(0.15),
+        "panel1_onset_times": jnp.array([0.05, 0.2, jnp.nan]),
+        "panel1_impacts": jnp.asarray(2.0),
+        "alpha": jnp.zeros(3),
+    }
+    assert np.asarray(event_steps(outputs, step_ends)).tolist() == [1, 0, 1, -1]

@@ -9,7 +9,14 @@ the unperturbed run's accepted steps, the discrete map AD differentiates — and
 run re-adapts its steps, what a user perturbing the model sees (its noise is O(tol/h)). A
 perturbed run that has another number of contact onsets than its partner (`Scene.events`'
 counts, e.g. `impacts`) differences across a jump of the output: such steps are flagged and
-left out of the verdict.
+left out of the verdict. A replayed pair is flagged too when a located event (the latch's
+engagement, a contact onset: `event_steps`) fell in another step than in its partner: the
+unperturbed run's steps end just past its events (`LocateEvents`), so a perturbation that
+moves an event later puts it in the next step, where the model switches (the latch acts, v⁻ is
+taken) in another place — a jump of the replayed map that grows relative to h as h shrinks,
+not a derivative (deploy_array's lock time: replayed differences drifted from 0.7 % to 29 %
+off AD between h = 1e-4 and 1e-6 while no impact count changed). Separations are not counted
+(their located times carry no derivative and are not outputs).
 
 Verdict. The converged difference is the mean of the pair of consecutive unflagged steps of
 one kind that agree best, over both kinds (their relative spread and their kind are
@@ -31,6 +38,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 
 DEFAULT_STEPS = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
 DEFAULT_TOLERANCE = 1e-2
@@ -45,6 +53,28 @@ def count_names(outputs: Mapping) -> list[str]:
     """The outputs that count events (`impacts`, `{owner}_impacts`): a change of one between
     two runs is a jump of the discrete map."""
     return sorted(k for k in outputs if k == "impacts" or k.endswith("_impacts"))
+
+
+def event_time_names(outputs: Mapping) -> list[str]:
+    """The outputs that are located event times: `*_time` scalars (`lock_time`,
+    `{owner}_first_onset_time`) and `*onset_times` arrays (every episode's onset)."""
+    return sorted(k for k in outputs if k == "onset_times" or k.endswith(("_time", "_onset_times")))
+
+
+def event_steps(outputs: Mapping, step_times):
+    """The index of the step (in `step_times`, the replayed run's step ends, padded with
+    +inf) in which each located event of `outputs` fell, −1 for an event not reached. Two
+    replayed runs whose indices differ have an event on different sides of a step end: the
+    step that holds it switches the model (the latch engages, v⁻ is taken) in another place,
+    so their difference is not that of one discrete map."""
+    import jax.numpy as jnp
+
+    names = event_time_names(outputs)
+    if not names:
+        return jnp.zeros((0,))
+    times = jnp.concatenate([jnp.ravel(outputs[k]) for k in names])
+    index = jnp.searchsorted(jnp.asarray(step_times), times)
+    return jnp.where(jnp.isfinite(times), index, -1).astype(float)
 
 
 @dataclass
@@ -245,10 +275,15 @@ def gradient_check(
             f"{name} = {value} at these parameters (not reached by t_end = {t_end} s?)"
         )
 
-    def with_counts(outputs):
+    def with_counts(outputs, step_times=None):
+        """The output, the event counts and (replayed runs) the steps holding each event:
+        a difference of the counts or steps that is not 0 flags the step h."""
         import jax.numpy as jnp
 
-        return jnp.stack([scalar(outputs), *(outputs[k] for k in count_names(outputs))])
+        values = jnp.stack([scalar(outputs), *(outputs[k] for k in count_names(outputs))])
+        if step_times is None:
+            return values
+        return jnp.concatenate([values, event_steps(outputs, step_times)])
 
     checks = {
         k: ParameterCheck(
@@ -276,8 +311,11 @@ def gradient_check(
         for kind in kinds:
             say(f"central differences, relative step {label}, {kind}")
             extra = replayed if kind == "replay" else {}
+            flags = with_counts
+            if kind == "replay" and replayed:
+                flags = partial(with_counts, step_times=replayed["replay_steps"])
             d = central_differences(
-                scene, base, wrt, with_counts, t_end, h, replay=False, abs_step=abs_step,
+                scene, base, wrt, flags, t_end, h, replay=False, abs_step=abs_step,
                 **options, **extra,
             )  # fmt: skip
             for k in wrt:
@@ -291,16 +329,27 @@ def gradient_check(
 
 
 def _scalar_output(output):
+    """`output` as a function of the outputs: a callable as it is, a name `NAME` (a scalar
+    output) or `NAME[k]` (entry k of a per-episode output, e.g. `panel1_peak_forces[0]`)."""
+    import re
+
     if callable(output):
         return output
+    indexed = re.fullmatch(r"(\w+)\[(\d+)\]", output)
+    name, index = (indexed[1], int(indexed[2])) if indexed else (output, None)
 
     def named(outputs):
-        if output not in outputs:
+        if name not in outputs:
             raise ValueError(
-                f"output {output!r} is not an output of the scene; valid: "
+                f"output {name!r} is not an output of the scene; valid: "
                 + ", ".join(sorted(outputs))
             )
-        return outputs[output]
+        value = outputs[name]
+        if index is None:
+            return value
+        if not (getattr(value, "ndim", 0) == 1 and index < value.shape[0]):
+            raise ValueError(f"output {output!r}: {name} has shape {value.shape}")
+        return value[index]
 
     return named
 

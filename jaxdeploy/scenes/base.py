@@ -134,10 +134,35 @@ class Scene(abc.ABC):
         by default, scenes add theirs (e.g. `deploy_array`'s `lock_time`)."""
         return {}
 
+    def episode_names(self, mechanism: Mechanism) -> list[str]:
+        """The name of each clearance joint in the episode outputs (the order of
+        `mechanism.find(RevoluteClearance)`): by default `joint{k}` (k from 1), "" for a
+        scene with one clearance joint (its outputs then carry no prefix)."""
+        from ..mechanism import RevoluteClearance
+
+        joints = mechanism.find(RevoluteClearance)
+        return [""] if len(joints) == 1 else [f"joint{k + 1}" for k in range(len(joints))]
+
+    def episode_outputs(self, mechanism: Mechanism, trajectory) -> dict:
+        """Per clearance joint (`episode_names`), differentiable outputs of its contact
+        episodes (`jaxdeploy.solvers.episodes.episode_outputs`): `{name}_onset_times`,
+        `{name}_impact_velocities`, `{name}_peak_forces`, `{name}_peak_penetrations` (arrays
+        over its first episodes, NaN-padded) and the run's `{name}_peak_force`,
+        `{name}_peak_penetration` (scalars)."""
+        from ..solvers.episodes import episode_outputs
+
+        if trajectory.episodes is None:
+            return {}
+        return episode_outputs(trajectory.episodes, self.episode_names(mechanism))
+
     def outputs(self, mechanism: Mechanism, trajectory) -> dict:
         """What a loss or objective reads by name: the `channels` (arrays over the saved
-        times) and the `events` (scalars)."""
-        return {**self.channels(mechanism, trajectory), **self.events(mechanism, trajectory)}
+        times), the `events` (scalars) and the `episode_outputs` (per contact episode)."""
+        return {
+            **self.channels(mechanism, trajectory),
+            **self.events(mechanism, trajectory),
+            **self.episode_outputs(mechanism, trajectory),
+        }
 
     def select_channels(self, mechanism: Mechanism, trajectory, names) -> dict:
         """`{name: channel}` for the requested `names`; an unknown name raises `ValueError`

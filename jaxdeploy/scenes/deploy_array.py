@@ -518,6 +518,11 @@ class DeployArray(Scene):
             out[f"{owner}_impacts"] = counts[index]
         return out
 
+    def episode_names(self, mechanism):
+        """Each clearance joint by its owner (`panel1`, `panel2`, …), as in `events`."""
+        joint_names = list(JOINTS)
+        return [self.clearance_joints[joint_names[i]] for i in mechanism.find(RevoluteClearance)]
+
     # The deployment angle α [rad] at which the root latch engages (`alpha` channel).
     lock_angle = GEOMETRY["latch"]["engage_alpha"]
 

@@ -271,3 +271,29 @@ def log_step(log, mechanism, t0, t1, y0, y1, motion, capacity: int = DEFAULT_CAP
             ),
         )
     return log
+
+
+def episode_outputs(log: EpisodeLog | None, names) -> dict:
+    """Differentiable per-episode outputs of a run's log, for losses and objectives
+    (`Scene.outputs`): per clearance joint (row of the log, named by `names`, "" for no
+    prefix) `{name}_onset_times`, `{name}_impact_velocities`, `{name}_peak_forces` and
+    `{name}_peak_penetrations` — arrays over the first `capacity` episodes, NaN where the run
+    had fewer — and the run's extremes `{name}_peak_force` [N] and `{name}_peak_penetration`
+    [m] over every contact step (NaN: no contact). Onset times carry the implicit-function
+    derivative of their location, peaks the envelope theorem's (module docstring)."""
+    if log is None:
+        return {}
+    out = {}
+    for row, name in enumerate(names):
+        prefix = f"{name}_" if name else ""
+
+        def finite(x):
+            return jnp.where(jnp.isfinite(x), x, jnp.nan)
+
+        out[f"{prefix}onset_times"] = log.onset_time[row]
+        out[f"{prefix}impact_velocities"] = log.impact_velocity[row]
+        out[f"{prefix}peak_forces"] = log.peak_force[row]
+        out[f"{prefix}peak_penetrations"] = finite(log.peak_penetration[row])
+        out[f"{prefix}peak_force"] = finite(log.force_max[row])
+        out[f"{prefix}peak_penetration"] = finite(log.penetration_max[row])
+    return out
