@@ -83,7 +83,8 @@ def test_hertz_impact_episode_against_johnsons_closed_forms():
     np.testing.assert_allclose(float(lines[1].split(",")[4]), row["onset_time"], rtol=0)
 
 
-@pytest.mark.slow  # ≤ 35 CPU-s (forward mode through one Dopri8 run; with 5 other files' cheap tests 46 CPU-s at load 13)
+# ≤ 35 CPU-s: forward mode through one Dopri8 run (measured with 5 files' cheap tests: 46 CPU-s)
+@pytest.mark.slow
 def test_episode_outputs_differentiate_like_johnsons_closed_forms():
     """`Scene.outputs`' per-episode outputs are differentiable: on the undamped Hertz impact,
     forward mode through the run gives the derivatives of Johnson's closed forms,
