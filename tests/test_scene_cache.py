@@ -32,9 +32,11 @@ def _built(scene, params, counts):
 
     def assemble(mechanism):
         counts["assemble"] += 1
-        return scene.initial_state(params, mechanism)
+        return scene.initial_state(params, mechanism), {"n": mechanism.n_coordinates}
 
-    return _scene_cache.built(scene, params, build, assemble)
+    mechanism, initial, facts, source = _scene_cache.built(scene, params, build, assemble)
+    assert facts == {"n": mechanism.n_coordinates}  # kept with the mechanism
+    return mechanism, initial, source
 
 
 def test_a_stored_scene_comes_back_with_the_same_leaves_and_program_key(cache):
@@ -114,26 +116,51 @@ def test_cache_off_stores_nothing(tmp_path, monkeypatch):
     assert counts == {"build": 2, "assemble": 2}
 
 
-def test_a_second_command_reads_the_scene_and_gives_identical_results(tmp_path):
+# `jaxdeploy simulate` in a new process, printing (on stderr's last line) the functions JAX
+# traced in it.
+_COMMAND = """
+import json, sys
+from jax import monitoring
+traced = []
+def record(event, start, end, **kwargs):
+    if event == "/jax/core/compile/jaxpr_trace_duration":
+        traced.append(kwargs.get("fun_name"))
+monitoring.register_event_time_span_listener(record)
+from jaxdeploy.cli import main
+code = main(sys.argv[1:])
+print(json.dumps(traced), file=sys.stderr)
+sys.exit(code)
+"""
+
+
+def test_a_second_command_reads_the_scene_traces_no_program_and_gives_identical_results(
+    tmp_path,
+):
+    """The second run reads the scene and every program back: of the functions the first
+    traced (the assembly, the run, the plausibility checks' constraint residuals, the energy
+    balance, the analysis's drift), it traces none; what is left are JAX's single
+    operations on concrete arrays."""
     env = {k: v for k, v in os.environ.items() if k != "EQX_ON_ERROR"}
     env["JAXDEPLOY_CACHE_DIR"] = str(tmp_path / "xla")
-    outputs = []
+    runs = []
     for run in ("first", "second"):
         out = tmp_path / run
         done = subprocess.run(
-            [sys.executable, "-m", "jaxdeploy.cli", "simulate", "pendulum", "--t-end", "0.1",
+            [sys.executable, "-c", _COMMAND, "simulate", "pendulum", "--t-end", "0.1",
              "--n-save", "11", "--out", str(out)],
             env=env, capture_output=True, text=True,
         )  # fmt: skip
         assert done.returncode == 0, done.stderr[-2000:]
-        outputs.append((done.stderr, out))
-    assert "from the scene cache" not in outputs[0][0]
-    assert "from the scene cache" in outputs[1][0]
-    with (
-        np.load(outputs[0][1] / "trajectory.npz") as a,
-        np.load(outputs[1][1] / "trajectory.npz") as b,
-    ):
+        runs.append((done.stderr, json.loads(done.stderr.strip().splitlines()[-1]), out))
+    (first_err, first, first_out), (second_err, second, second_out) = runs
+    assert "from the scene cache" not in first_err and "from the scene cache" in second_err
+    programs = {"_consistent_core", "_solve", "residuals", "energy_balance", "_largest_residual"}
+    assert {f"exported_{name}" for name in programs} <= set(first), first
+    assert not [n for n in second if n.startswith(("exported_", "kept_")) or n in programs], second
+    assert "init_memory" not in second  # the memory estimate is kept with the scene
+    with np.load(first_out / "trajectory.npz") as a, np.load(second_out / "trajectory.npz") as b:
         for name in a.files:
             assert a[name].tobytes() == b[name].tobytes(), name
-    first, second = (json.loads((out / "summary.json").read_text()) for _, out in outputs)
-    assert first["status"] == second["status"] == "ok"
+    summaries = [json.loads((out / "summary.json").read_text()) for out in (first_out, second_out)]
+    assert summaries[0]["status"] == summaries[1]["status"] == "ok"
+    assert summaries[0]["max_constraint_violation"] == summaries[1]["max_constraint_violation"]

@@ -189,8 +189,12 @@ def _residual_program():
 
 
 def _residuals(mechanism, q, ts):
-    """Φ(q, t) of every saved state (one compiled program per mechanism structure)."""
-    return _residual_program()(mechanism, q, ts)
+    """Φ(q, t) of every saved state (one compiled program per mechanism structure), through
+    the program cache when it is on: a warm `jaxdeploy simulate` reads the program back
+    instead of tracing it (`jaxdeploy/_program_cache.py`)."""
+    from .. import _program_cache
+
+    return _program_cache.call(_residual_program(), mechanism, q, ts)
 
 
 def _contact_steps_check(mechanism, trajectory) -> list[Check]:

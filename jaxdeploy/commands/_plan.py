@@ -60,12 +60,12 @@ def duration_text(seconds: float) -> str:
     return f"{seconds:.3g} s"
 
 
-def saved_state_bytes(mechanism, n_save: int, runs: int = 1) -> int:
+def saved_state_bytes(mechanism, n_save: int, runs: int = 1, memory: int | None = None) -> int:
     """Bytes of the saved states of `runs` runs of `mechanism` with `n_save` saved times: q,
-    q̇, q̈ (n each), λ (m) and the elements' memory per saved time, float64, times
-    `OUTPUT_COPIES`."""
+    q̇, q̈ (n each), λ (m) and the elements' memory per saved time (`memory` numbers, default
+    `memory_floats(mechanism)`), float64, times `OUTPUT_COPIES`."""
     per_state = 3 * mechanism.n_coordinates + mechanism.n_constraints + 1
-    per_state += memory_floats(mechanism)
+    per_state += memory_floats(mechanism) if memory is None else int(memory)
     return OUTPUT_COPIES * FLOAT_BYTES * per_state * int(n_save) * int(runs)
 
 

@@ -58,9 +58,11 @@ def key(scene, params) -> str | None:
 
 
 def built(scene, params, build, assemble):
-    """`(mechanism, initial_state, source)`: read back, or `mechanism = build()`,
-    `initial = assemble(mechanism)` and stored (source "cache" or "built"). Exceptions of
-    `build` and `assemble` propagate and nothing is stored."""
+    """`(mechanism, initial_state, facts, source)`: read back, or `mechanism = build()`,
+    `initial, facts = assemble(mechanism)` and stored (source "cache" or "built"; `facts`:
+    plain data the caller derives from the mechanism and wants kept with it, e.g. numbers
+    whose computation traces). Exceptions of `build` and `assemble` propagate and nothing is
+    stored."""
     where = folder()
     cache_key = None if where is None else key(scene, params)
     path = None if cache_key is None else os.path.join(where, f"{cache_key}.pickle")
@@ -69,14 +71,14 @@ def built(scene, params, build, assemble):
         if stored is not None:
             return (*stored, "cache")
     mechanism = build()
-    initial = assemble(mechanism)
+    initial, facts = assemble(mechanism)
     if path is not None:
-        store(path, cache_key, (mechanism, initial))
-    return mechanism, initial, "built"
+        store(path, cache_key, (mechanism, initial, facts))
+    return mechanism, initial, facts, "built"
 
 
 def load(path: str, cache_key: str):
-    """The pair stored at `path` for `cache_key`, or None (none stored, or discarded)."""
+    """What is stored at `path` for `cache_key`, or None (none stored, or discarded)."""
     try:
         with open(path, "rb") as f:
             payload = f.read()
@@ -106,11 +108,11 @@ def _discard(path: str, why: str) -> None:
     return None
 
 
-def store(path: str, cache_key: str, pair) -> None:
+def store(path: str, cache_key: str, stored) -> None:
     from ..io import atomic_write_bytes
 
     try:
-        contents = pickle.dumps(pair)
+        contents = pickle.dumps(stored)
     except Exception:  # noqa: BLE001 - an element that cannot be pickled: built every time
         return
     entry = {"key": cache_key, "digest": hashlib.sha256(contents).hexdigest()}

@@ -197,21 +197,24 @@ def _build(args, scene, params, control, phases):
     earlier run built the same scene with the same parameters (`_scene_cache`), else built,
     planned (before the assembly compiles its Newton iteration) and assembled. The plan is
     checked on a cached mechanism too: it depends on the command's other flags."""
-    from . import _scene_cache
+    from ..mechanism import balance_metered
+    from . import _plan, _scene_cache
 
     def assemble(mechanism):
+        # Kept with the mechanism: finding it traces the memory's initialisation.
+        facts = {"memory_floats": _plan.memory_floats(balance_metered(mechanism) or mechanism)}
         try:
-            _plan_run(args, scene, mechanism, control)
+            _plan_run(args, scene, mechanism, control, facts["memory_floats"])
         except ValueError as err:
             raise _Refused(str(err)) from None
-        return scene.initial_state(params, mechanism)
+        return scene.initial_state(params, mechanism), facts
 
-    mechanism, initial, source = _scene_cache.built(
+    mechanism, initial, facts, source = _scene_cache.built(
         scene, params, lambda: scene.build(params), assemble
     )
     if source == "cache":
         try:
-            _plan_run(args, scene, mechanism, control)
+            _plan_run(args, scene, mechanism, control, facts["memory_floats"])
         except ValueError as err:
             raise _Refused(str(err)) from None
         phases.say("  the mechanism and its initial state from the scene cache")
@@ -242,9 +245,10 @@ def _default_out(args) -> str:
     return default_output_dir("simulate", args.scene or DEFAULT_SCENE)
 
 
-def _plan_run(args, scene, mechanism, control) -> None:
+def _plan_run(args, scene, mechanism, control, memory_floats) -> None:
     """Refuse (`ValueError`) what the built mechanism shows cannot work: tolerances too loose
-    for its clearances, outputs too large for the memory."""
+    for its clearances, outputs too large for the memory (`memory_floats`: numbers in a
+    saved state's memory of the mechanism that runs, with its meter: `_plan.memory_floats`)."""
     from ..mechanism import balance_metered
     from . import _plan
 
@@ -252,7 +256,9 @@ def _plan_run(args, scene, mechanism, control) -> None:
     with_reference = not args.no_reference and scene.ideal_counterpart() is not None
     run = balance_metered(mechanism) or mechanism  # the mechanism that runs, with its meter
     _plan.check_memory(
-        _plan.saved_state_bytes(run, args.n_save, runs=2 if with_reference else 1),
+        _plan.saved_state_bytes(
+            run, args.n_save, runs=2 if with_reference else 1, memory=memory_floats
+        ),
         f"--n-save = {args.n_save} saved states of {scene.name}",
         "lower --n-save",
     )

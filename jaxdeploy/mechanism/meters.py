@@ -246,7 +246,9 @@ def metered_balance(mechanism: Mechanism, q, v, memory) -> dict:
     and `memory` (the `BalanceMeter`'s memory is the last entry)."""
     meter = mechanism.elements[-1]
     alone = Mechanism(mechanism.bodies, meter.meters, mechanism.ground_points)
-    return energy_balance(alone, q, v, memory[-1])
+    # Through the program cache when it is on: a warm `jaxdeploy simulate` reads the
+    # program back instead of tracing it.
+    return _program_cache.call(energy_balance, alone, q, v, memory[-1])
 
 
 class StepClock(AbstractElement):
