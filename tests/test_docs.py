@@ -2,9 +2,12 @@
 
 import pathlib
 import re
+import warnings
 
 import numpy as np
 import pytest
+
+from jaxdeploy.solvers import SolverChoiceWarning
 
 DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs"
 
@@ -14,16 +17,20 @@ def _python_blocks(name):
     return re.findall(r"```python\n(.*?)```", text, flags=re.S)
 
 
-@pytest.mark.slow  # 66 s of the default suite at 844cb65 (2 cores): kept out of it
+@pytest.mark.slow  # ~32 CPU-s the run, ~140 CPU-s the reverse-mode example (load ~13, 46f1f28)
 def test_mechanism_page_four_bar_runs(monkeypatch):
     # The page's script turns the persistent caches on (`enable_caches()`); in this shared
     # test process they stay off (a script's second process is tests/test_python_caches.py).
     monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", "off")
     namespace = {}
-    for block in _python_blocks("mechanism.md"):
-        exec(compile(block, "docs/mechanism.md", "exec"), namespace)
+    with warnings.catch_warnings():
+        # The page's example runs the defaults: no solver-choice warning may fire.
+        warnings.simplefilter("error", SolverChoiceWarning)
+        for block in _python_blocks("mechanism.md"):
+            exec(compile(block, "docs/mechanism.md", "exec"), namespace)
     trajectory = namespace["trajectory"]
     assert trajectory.ok, trajectory.status()
+    assert trajectory.control.solver_name() == "dopri8"  # the default for clearance joints
     # The spring turns the crank: it has moved, and every constraint still holds.
     q = np.asarray(trajectory.q)
     assert abs(q[-1, 2] - q[0, 2]) > 0.05
