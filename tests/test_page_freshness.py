@@ -44,9 +44,6 @@ PROSE = {
 PENDING = {
     "README.md": "tour times older than jaxdeploy/ (38fd6c3 and later; make bench)",
     "docs/performance.md": "older than the code it measures (make bench)",
-    "docs/contact.md": "clearance_sides block older than jaxdeploy/mechanism/clearance.py (the "
-    "onset clock of the located, differentiable onset times; python -m tools.pages --only "
-    "clearance_sides)",
 }
 PENDING |= {
     page: "not regenerated since its generator records provenance (make pages)"
