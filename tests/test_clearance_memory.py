@@ -228,7 +228,8 @@ def test_unknown_impact_velocity_rule_is_refused_with_the_valid_ones():
         _driven_joint("peak")
 
 
-def test_onset_rule_force_is_continuous_at_a_rough_contact_separation():
+@pytest.mark.parametrize("rule", ["onset", "running_max"])
+def test_force_is_continuous_at_a_rough_contact_separation(rule):
     """A rough law pushes below its onset level; the memory's switch out of contact at a step
     end must not switch that force off (a jump at an instant that moves with the parameters:
     derivatives through the run would miss its saltation term). A journal receding through
@@ -241,7 +242,8 @@ def test_onset_rule_force_is_continuous_at_a_rough_contact_separation():
     sigma, v_minus, rate = 2e-6, 0.05, -0.04  # m, m/s, m/s (receding)
     law = LankaraniNikravesh(RoughElastic(1e10, sigma), 0.9)
     joint = RevoluteClearance("ground", "B", "journal", "c", clearance=DRIVEN_C,
-                              journal_radius=5e-3, normal=law)  # fmt: skip
+                              journal_radius=5e-3, normal=law,
+                              impact_velocity_rule=rule)  # fmt: skip
     mech = Mechanism([Body("journal", 1.0, 1e-5, {"c": (0.0, 0.0)})], [joint],
                      ground_points={"B": (0.0, 0.0)})  # fmt: skip
     level = float(law.elastic.onset_penetration())
@@ -263,3 +265,7 @@ def test_onset_rule_force_is_continuous_at_a_rough_contact_separation():
     expected = elastic * (1 + float(law.chi()) * rate / v_minus)
     assert before_switch == pytest.approx(expected, rel=1e-9)
     assert after_switch == pytest.approx(before_switch, rel=1e-12)
+    # Out of contact an approaching state sees its own δ̇, not the held v⁻ (a new contact's
+    # v⁻ starts from it: continuous at the next onset).
+    approaching = jnp.asarray([0.01, -0.01])
+    assert float(joint._impact_velocity(after, approaching)[0]) == pytest.approx(0.01)

@@ -140,6 +140,27 @@ def test_rough_onset_near_s0_minus_three_sigma(offset):
     assert float(law.force(onset + 2 * SIGMA)) / scale > 1e-2
 
 
+def test_rough_force_at_onset_level_against_scipy_quadrature():
+    """The onset level's force relative to one σ deeper and to δ = s0 σ, as the docstring of
+    `onset_penetration` states them (4.0 %, 6.1e-4 for n = 1.5; 4.5 % one σ deeper for n = 1),
+    against E[(Z − h)_+^n] by scipy's quadrature of the normal density (no shared code)."""
+    from scipy import integrate, stats
+
+    def smoothed(h, n):
+        integrand = lambda z: (z - h) ** n * stats.norm.pdf(z)  # noqa: E731
+        return integrate.quad(integrand, h, np.inf, epsabs=0.0, epsrel=1e-12)[0]
+
+    for n, one_sigma, at_s0 in ((1.5, 0.0397, 6.14e-4), (1.0, 0.0450, 9.58e-4)):
+        law = RoughElastic(K, SIGMA, offset=1.0, exponent=n)
+        onset = float(law.onset_penetration())
+        ratio = float(law.force(onset)) / float(law.force(onset + SIGMA))
+        assert ratio == pytest.approx(smoothed(3.0, n) / smoothed(2.0, n), rel=1e-6)
+        assert ratio == pytest.approx(one_sigma, abs=5e-5)
+        ratio_s0 = float(law.force(onset)) / float(law.force(SIGMA))
+        assert ratio_s0 == pytest.approx(smoothed(3.0, n) / smoothed(0.0, n), rel=1e-6)
+        assert ratio_s0 == pytest.approx(at_s0, abs=5e-6)
+
+
 def test_rough_stiffness_is_force_gradient():
     # Against autodiff through the force's own quadrature (`quadrature_force`), which is
     # independent of `stiffness`; `force` itself is differentiated by `stiffness`.

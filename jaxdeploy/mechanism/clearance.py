@@ -58,16 +58,18 @@ joint's `impact_velocity_rule`:
   onset speed, and the damping ratio there is χ at most — and a receding one the last
   contact's v⁻, held past its separation until the next onset ("Continuity at separation").
 * `"running_max"`: v⁻(t) = max_{s ∈ [t_on, t]} δ̇(s), the largest approach speed of the current
-  contact, and the law sees `max(v⁻, δ̇)`. It differs from `onset` only when the approach keeps
-  speeding up after onset — a contact driven in by the mechanism, or one that starts at rest — and
-  then keeps the damping ratio χ δ̇/v⁻ ≤ χ, so the rebound is calibrated to the speed actually
-  reached. This rule is not from the literature; it is an option for such contacts.
+  contact, and the law sees `max(v⁻, δ̇)` in contact; out of contact, as with `onset`, an
+  approaching state's own δ̇ and a receding one the last contact's v⁻. It differs from
+  `onset` only when the approach keeps speeding up after onset — a contact driven in by the
+  mechanism, or one that starts at rest — and then keeps the damping ratio χ δ̇/v⁻ ≤ χ, so
+  the rebound is calibrated to the speed actually reached. This rule is not from the
+  literature; it is an option for such contacts.
 
 With both rules a contact that begins at rest has v⁻ ≈ 0, and the law divides by its
 `impact_velocity_floor` instead (`jaxdeploy.contact.damping`). The far side shares the joint's v⁻
 (one contact episode, whichever wall).
 
-**Continuity at separation** (rule `onset`). A rough elastic law pushes below its onset level
+**Continuity at separation** (both rules). A rough elastic law pushes below its onset level
 ((s0 − 3)σ, where "in contact" begins): 0.08 N at deploy_array's defaults, 4 % of its force
 one σ deeper. Had v⁻ been reset at the separation, the receding journal's damping ratio
 χ δ̇/v_eff (δ̇ < 0, v_eff the law's floor) would clip the force to 0 there: a jump of
@@ -356,15 +358,15 @@ class RevoluteClearance(AbstractElement):
                 return running_max, event, jnp.where(was_in, 1.0, s_on)
 
             def out_of_contact_at_end():
-                # A contact that ended inside this step: v⁻ resets there, and with it the force
-                # (a rough law's force at its onset level is not zero), so the separation is an
-                # event too. Unlocated, the reset lands on whichever step end follows it, and
-                # runs at any tolerance differed by ~1e-6 c after the first separation
-                # (deploy_array, Dopri8 at rtol 1e-11…1e-13).
+                # A contact that ended inside this step: v⁻ stays held past the separation, as
+                # with rule `onset` (`_impact_velocity`; module docstring, "Continuity at
+                # separation"); the next onset starts a new running maximum
+                # (`in_contact_at_end`). The separation is still located, so the step that
+                # switches the memory ends on it (the law sees held v⁻ either side).
                 event = jax.lax.cond(
                     was_in, lambda: path.separation(onset), lambda: jnp.ones_like(g.penetration)
                 )
-                return g.penetration_rate, event, jnp.ones_like(g.penetration)
+                return memory["impact_velocity"], event, jnp.ones_like(g.penetration)
 
             # The interpolant's root and peak searches (µs per step) only where they matter.
             v_minus, event, s_onset = jax.lax.cond(now_in, in_contact_at_end, out_of_contact_at_end)
@@ -417,8 +419,13 @@ class RevoluteClearance(AbstractElement):
             # "Continuity at separation").
             held = memory["impact_velocity"]
             return jnp.where(memory["in_contact"] > 0.5, held, jnp.where(rate > 0, rate, held))
-        # The running maximum of the approach speed includes the present state (docstring).
-        return jnp.maximum(memory["impact_velocity"], rate)
+        # In contact, the running maximum of the approach speed includes the present state
+        # (docstring); out of contact, as rule `onset`: the state's own δ̇ approaching (a new
+        # contact's maximum starts from it), the held v⁻ receding.
+        held = memory["impact_velocity"]
+        return jnp.where(
+            memory["in_contact"] > 0.5, jnp.maximum(held, rate), jnp.where(rate > 0, rate, held)
+        )
 
     def contact_forces(self, kin: Kinematics, memory):
         """`(F_N, F_T, geometry)` at state `kin`: the net normal force on the journal along
