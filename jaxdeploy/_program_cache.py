@@ -557,6 +557,21 @@ def folder_is_private(where: str, what: str) -> bool:
     return False
 
 
+def discard_entry(path: str, cache: str, why: str, redo: str) -> None:
+    """Delete the damaged or foreign entry `path` of `cache` (its name in the message) and
+    say so in one line on stderr, with `why` and what happens instead (`redo`, e.g.
+    "building the scene again"). Returns None: what a loader returns for "not stored"."""
+    print(
+        f"warning: {cache}: discarding {path}: {why}; {redo} (if this recurs, delete the folder)",
+        file=sys.stderr,
+    )
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+    return None
+
+
 def _store(path: str, payload: bytes) -> None:
     where = os.path.dirname(path)
     try:

@@ -139,9 +139,9 @@ def test_engagement_sets_the_anchor_once_and_nothing_acts_before():
     np.testing.assert_array_equal(later["anchor"], after["anchor"])
 
 
-def test_potential_is_the_conservative_force_with_a_moving_roller_body():
-    """`Q = −∇V` for an engaged latch between two moving bodies (damping 0), at the pose where
-    it engaged (the roller carrier moving: exact where P is at its anchor)."""
+def _two_moving_bodies():
+    """A preloaded latch between two free bodies (lock angle 0.1 rad, 40 N m/rad, a 30 N
+    preload on body b's roller): `(mechanism, latch)`."""
     a = Body("a", 2.0, 0.1, {"hole": (0.3, 0.0)})
     b = Body("b", 1.0, 0.05, {"pin": (-0.2, 0.0)})
     latch = PreloadedLatch(
@@ -154,7 +154,13 @@ def test_potential_is_the_conservative_force_with_a_moving_roller_body():
         preload_point=(-0.17, 0.01),
         preload_angle=2.5,
     )
-    mech = Mechanism([a, b], [latch])
+    return Mechanism([a, b], [latch]), latch
+
+
+def test_potential_is_the_conservative_force_with_a_moving_roller_body():
+    """`Q = −∇V` for an engaged latch between two moving bodies (damping 0), at the pose where
+    it engaged (the roller carrier moving: exact where P is at its anchor)."""
+    mech, latch = _two_moving_bodies()
     q = jnp.array([0.1, 0.2, 0.3, 0.5, 0.4, 0.45])
     memory = mech.init_memory(q, jnp.zeros(6))
     memory = ({"engaged": jnp.asarray(1.0), "anchor": memory[0]["anchor"]},)
@@ -171,19 +177,7 @@ def test_the_preload_stores_no_energy_before_its_anchor_is_set():
     preload's potential is 0, not −f·(r_P − the run's initial anchor): an energy meter booked
     that difference as energy put in at the engagement (−2.7 J of deploy_array's 4.2 J), the
     whole residual of its balance. After the engagement it is measured from the new anchor."""
-    a = Body("a", 2.0, 0.1, {"hole": (0.3, 0.0)})
-    b = Body("b", 1.0, 0.05, {"pin": (-0.2, 0.0)})
-    latch = PreloadedLatch(
-        "a",
-        "b",
-        lock_angle=0.1,
-        stiffness=40.0,
-        preload=30.0,
-        preload_body="b",
-        preload_point=(-0.17, 0.01),
-        preload_angle=2.5,
-    )
-    mech = Mechanism([a, b], [latch])
+    mech, latch = _two_moving_bodies()
     start = jnp.array([0.1, 0.2, 0.3, 0.5, 0.4, 0.35])  # α = 0.05: before the stop
     (memory,) = mech.init_memory(start, jnp.zeros(6))
     assert float(memory["engaged"]) == 0.0

@@ -106,6 +106,22 @@ def check_tolerances(mechanism, control) -> None:
         raise ValueError(problem)
 
 
+# Runs whose saved states a derivative evaluation holds at once: the run, its tangent or
+# cotangent (forward mode's one per parameter counted as one run) and one more beside them (a
+# difference run in gradcheck, the ideal reference in optimize, the residuals in fit).
+DERIVATIVE_RUNS_HELD = 3
+
+
+def check_derivative_run(scene, params, control, n_save: int, what: str, remedy: str) -> None:
+    """Refuse (`ValueError`) tolerances too loose for the clearances of `scene` at `params`
+    (`check_tolerances`) and `n_save` saved states of `DERIVATIVE_RUNS_HELD` runs that would
+    not fit in memory (`check_memory`, naming `what` and the `remedy`). Building the mechanism
+    compiles nothing: fit, optimize and gradcheck refuse before their first compile."""
+    mechanism = scene.build(params)
+    check_tolerances(mechanism, control)
+    check_memory(saved_state_bytes(mechanism, n_save, runs=DERIVATIVE_RUNS_HELD), what, remedy)
+
+
 def claim_output(out: str, overwrite: bool):
     """The output folder `out`, locked for this run with a fresh staging folder to write into
     (`_output_folder.OutputFolder`); raises `FileExistsError` with the user's message."""

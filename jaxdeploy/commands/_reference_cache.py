@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._compilation_cache import cache_dir, usable_folder
-from .._program_cache import code_digest
+from .._program_cache import code_digest, discard_entry
 
 
 class StoredRun(NamedTuple):
@@ -158,18 +158,7 @@ def load(cache_key: str) -> StoredRun | None:
 
 
 def _discard(path: str, why: str) -> None:
-    import sys
-
-    print(
-        f"warning: reference cache: discarding {path}: {why}; computing the reference again "
-        "(if this recurs, delete the folder)",
-        file=sys.stderr,
-    )
-    try:
-        os.unlink(path)
-    except OSError:
-        pass
-    return None
+    return discard_entry(path, "reference cache", why, "computing the reference again")
 
 
 def store(cache_key: str, run, events: dict) -> None:

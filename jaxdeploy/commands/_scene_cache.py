@@ -27,10 +27,15 @@ import hashlib
 import json
 import os
 import pickle
-import sys
 
 from .._compilation_cache import cache_dir
-from .._program_cache import environment, equinox_on_error, folder_is_private, trace_settings
+from .._program_cache import (
+    discard_entry,
+    environment,
+    equinox_on_error,
+    folder_is_private,
+    trace_settings,
+)
 
 
 def folder() -> str | None:
@@ -96,16 +101,7 @@ def load(path: str, cache_key: str):
 
 
 def _discard(path: str, why: str) -> None:
-    print(
-        f"warning: scene cache: discarding {path}: {why}; building the scene again "
-        "(if this recurs, delete the folder)",
-        file=sys.stderr,
-    )
-    try:
-        os.unlink(path)
-    except OSError:
-        pass
-    return None
+    return discard_entry(path, "scene cache", why, "building the scene again")
 
 
 def store(path: str, cache_key: str, stored) -> None:

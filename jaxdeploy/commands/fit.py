@@ -355,20 +355,14 @@ def _validate(args) -> _Job:
     )
 
 
-# Runs whose states at the data's times a fit step holds at once: the run, its sensitivities
-# (forward mode, one per fitted parameter, counted as one more run) and the residuals.
-RUNS_HELD = 3
-
-
 def _plan_fit(scene, params, control, data) -> None:
-    """Refuse (`ValueError`) tolerances too loose for the start point's clearances and states
-    at the data's times that would not fit in memory (`_plan`); nothing is compiled."""
     from . import _plan
 
-    mechanism = scene.build(params)
-    _plan.check_tolerances(mechanism, control)
-    _plan.check_memory(
-        _plan.saved_state_bytes(mechanism, len(data.t), runs=RUNS_HELD),
+    _plan.check_derivative_run(
+        scene,
+        params,
+        control,
+        len(data.t),
         f"the {len(data.t)} data times of {scene.name} (a run's states at each, its "
         "sensitivities and residuals)",
         "thin the data (fewer rows)",

@@ -111,20 +111,14 @@ def _validate(args):
     return scene, params, control, out
 
 
-# Runs whose saved states a check holds at once: the run, its tangent or cotangent, and a
-# difference run beside them.
-RUNS_HELD = 3
-
-
 def _plan_run(args, scene, params, control) -> None:
-    """Refuse (`ValueError`) tolerances too loose for the scene's clearances and saved states
-    that would not fit in memory (`_plan`); building the mechanism compiles nothing."""
     from . import _plan
 
-    mechanism = scene.build(params)
-    _plan.check_tolerances(mechanism, control)
-    _plan.check_memory(
-        _plan.saved_state_bytes(mechanism, args.n_save, runs=RUNS_HELD),
+    _plan.check_derivative_run(
+        scene,
+        params,
+        control,
+        args.n_save,
         f"--n-save = {args.n_save} saved states of {scene.name} (a run, its derivative and a "
         "difference run)",
         "lower --n-save",

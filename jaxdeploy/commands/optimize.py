@@ -240,20 +240,14 @@ def run(args) -> int:
         return _optimize(args, scene, objective, bounds, fixed, x0, control, folder, began)
 
 
-# Runs whose saved states a gradient evaluation holds at once: the design's run, its
-# derivative, and the ideal reference.
-RUNS_HELD = 3
-
-
 def _plan_run(args, scene, params, control) -> None:
-    """Refuse (`ValueError`) tolerances too loose for the start design's clearances and saved
-    states that would not fit in memory (`_plan`); building the mechanism compiles nothing."""
     from . import _plan
 
-    mechanism = scene.build(params)
-    _plan.check_tolerances(mechanism, control)
-    _plan.check_memory(
-        _plan.saved_state_bytes(mechanism, args.n_save, runs=RUNS_HELD),
+    _plan.check_derivative_run(
+        scene,
+        params,
+        control,
+        args.n_save,
         f"--n-save = {args.n_save} saved states of {scene.name} (a run, its derivative and "
         "the ideal reference)",
         "lower --n-save",
