@@ -108,6 +108,7 @@ NUMERIC = {
         "--t-end": "pos",
         "--n-save": ("int", 2),
         "--tolerance": "unit",
+        "--derivative-change": "unit",
         "--steps": "unit",
         "--rtol": "unit",
         "--atol": "pos",

@@ -52,7 +52,7 @@ def test_the_json_record_says_what_the_issue_asks_and_is_strict():
     assert record["params"]["k"]["fd"] == {"1e-03": 1.0, "1e-04": 1.0}
 
 
-@pytest.mark.slow  # ~2 min CPU: forward mode and 2 x 2 difference batches of slider_crank
+@pytest.mark.slow  # forward mode at 2+ tolerances and 2 x 2 difference batches of slider_crank
 def test_gradcheck_command_on_the_first_onset(tmp_path, capsys):
     from jaxdeploy.cli import main
 
@@ -73,6 +73,12 @@ def test_gradcheck_command_on_the_first_onset(tmp_path, capsys):
     }
     assert (out / "gradcheck.png").stat().st_size > 0
     assert "clearance: AD" in printed and "verdict: agree" in printed
+    # The step tolerance was checked for the derivative and every run used the one chosen.
+    tolerance = record["step_tolerance"]
+    assert tolerance["met"] is True and tolerance["checks"][-1]["change"] <= 1e-3
+    assert record["step_control"]["rtol"] == tolerance["rtol"]
+    assert f"step tolerance: rtol {tolerance['rtol']:.0e}" in printed
+    assert "agreeing steps replay" in printed and "rerun" in printed
 
 
 def test_event_steps_say_in_which_replayed_step_each_event_fell():

@@ -2,6 +2,9 @@
 the derivative of one scalar output (an event time such as deploy_array's `lock_time`, or
 slider_crank's `first_onset_time`) by AD, forward and reverse mode, against central
 differences over a sweep of steps, replayed and rerun (`jaxdeploy.fit.gradient_check`).
+By default every run is at a step tolerance checked for its derivatives (tightened until the
+AD derivatives change by at most --derivative-change at a 10x tighter one; the line
+"step tolerance: …" and gradcheck.json's `step_tolerance` say which and why).
 Writes gradcheck.json and gradcheck.png; exit code 0 when AD agrees with the converged
 differences for every parameter, 1 when not."""
 
@@ -60,6 +63,20 @@ def add_arguments(parser) -> None:
         type=number_in("--tolerance", 0.0, 1.0, high_open=True),
         default=1e-2,
         help="relative agreement of AD with the converged differences, in (0, 1) (default 0.01)",
+    )
+    parser.add_argument(
+        "--derivative-change",
+        type=number_in("--derivative-change", 0.0, 1.0, high_open=True),
+        default=None,
+        help="the step tolerance is tightened (by 10 at a time, from --rtol or the scene's) until "
+        "the AD derivatives change by at most this fraction at a 10x tighter one, in (0, 1) "
+        "(default: --tolerance / 10)",
+    )
+    parser.add_argument(
+        "--no-step-tolerance-check",
+        action="store_true",
+        help="run at --rtol (or the scene's) as given, without checking that the derivatives "
+        "have converged there",
     )
     parser.add_argument(
         "--modes",
@@ -168,11 +185,12 @@ def _write(folder, check, args, scene, control, t_end) -> None:
     (`_output_folder`: an older result is replaced whole)."""
     from ..io import atomic_write_json, run_metadata
 
+    used = control if check.step_tolerance is None else check.step_tolerance.control
     record = {
         **check.to_json(),
         "scene_options": scene.options,
         "t_end_s": t_end,
-        "step_control": control.to_json(),
+        "step_control": used.to_json(),
         "meta": run_metadata(),
     }
     atomic_write_json(folder.file("gradcheck.json"), record)
@@ -214,6 +232,8 @@ def _check(args, scene, params, control, folder) -> int:
             modes=tuple(args.modes),
             n_save=args.n_save,
             control=control,
+            check_step_tolerance=not args.no_step_tolerance_check,
+            derivative_change=args.derivative_change,
             progress=progress,
         )
     except (ValueError, RuntimeError) as err:  # output unknown or not reached, a run failed

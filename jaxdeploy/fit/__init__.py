@@ -3,14 +3,21 @@
 `parameter_jacobian` differentiates any output of a run with respect to scene parameters
 (reverse or forward mode through the solver); `gradient_function` / `parameter_gradient` give
 a scalar loss and its gradient, in the mode the parameter count makes cheaper
-(`gradient_mode`). `load_measurements` reads CSV/npz data; `fit`
-runs Levenberg–Marquardt through the simulation (forward-mode derivatives through the
-generalized-α solver); `FitResult` reports estimates, standard errors, correlations and the
-loss history; `synthesize` makes noisy synthetic data from a scene. See
-docs/identification.md.
+(`gradient_mode`); `derivative_tolerance` chooses a step tolerance at which those
+derivatives, not only the values, have converged (`gradient_check` runs at it).
+`load_measurements` reads CSV/npz data; `fit` runs Levenberg–Marquardt through the simulation
+(forward-mode derivatives through the generalized-α solver); `FitResult` reports estimates,
+standard errors, correlations and the loss history; `synthesize` makes noisy synthetic data
+from a scene. See docs/identification.md.
 """
 
 from ._data import MeasurementError, Measurements, load_measurements
+from ._derivative_tolerance import (
+    DERIVATIVE_CHANGE,
+    DerivativeTolerance,
+    converged_tolerance,
+    derivative_tolerance,
+)
 from ._derivatives import (
     FORWARD_MODE_MAX_PARAMETERS,
     central_differences,
@@ -36,6 +43,10 @@ from ._schedule import RTOL_FLOOR, choose_tolerance, impact_horizons, onset_time
 from ._synthetic import model_channels, synthesize
 
 __all__ = [
+    "DERIVATIVE_CHANGE",
+    "DerivativeTolerance",
+    "converged_tolerance",
+    "derivative_tolerance",
     "FORWARD_MODE_MAX_PARAMETERS",
     "RTOL_CHECK_FLOOR",
     "RTOL_FLOOR",
