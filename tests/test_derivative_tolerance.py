@@ -29,7 +29,9 @@ def test_the_loosest_tolerance_whose_derivative_is_converged_is_chosen():
     # to the tighter value): 1.44e-2, 1.44e-3, 1.44e-4: > 1e-3, > 1e-3, ≤ 1e-3 → rtol 1e-8.
     evaluate, asked = _derivatives(8e3)
     control = StepControl("tsit5", rtol=1e-6, atol=1e-9)
-    found = converged_tolerance(evaluate, control, fraction=1e-3)
+    said = []
+    found = converged_tolerance(evaluate, control, fraction=1e-3, progress=said.append)
+    assert "rtol 1e-07 → 1e-08: derivatives changed by 1.4e-03 (limit 1e-03)" in said
     assert found.met is True
     assert found.rtol == pytest.approx(1e-8) and found.control.atol == pytest.approx(1e-11)
     assert asked == pytest.approx([1e-6, 1e-7, 1e-8, 1e-9])

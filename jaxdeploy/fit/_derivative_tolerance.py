@@ -121,6 +121,8 @@ def converged_tolerance(
         say(f"derivatives at rtol {tighter.rtol:.0e} (is rtol {current.rtol:.0e} converged?)")
         tight = evaluate(tighter)
         change = relative_change(derivatives, tight)
+        say(f"rtol {current.rtol:.0e} → {tighter.rtol:.0e}: derivatives changed by {change:.1e} "
+            f"(limit {fraction:.0e})")  # fmt: skip
         checks.append({
             "rtol": current.rtol, "rtol_check": tighter.rtol, "change": change,
             "derivatives": dict(derivatives), "derivatives_check": dict(tight),
