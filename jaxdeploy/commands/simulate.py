@@ -8,6 +8,8 @@ import os
 import sys
 import threading
 import time
+import warnings
+from typing import NamedTuple
 
 import numpy as np
 
@@ -34,7 +36,8 @@ DEFAULT_SCENE = "deploy_array"
 # on the 2-core reference machine while it was shared (load average ~9, so these are upper
 # values; docs/performance.md times the whole command quietly). Only the order
 # of magnitude matters: it sizes the estimate that stops a run of hours started by a
-# mistyped --t-end.
+# mistyped --t-end before anything is built. It cannot see what a parameter or a tolerance
+# does to the steps: the probe (`_run_length`) measures the run itself once it is compiled.
 INTEGRATE_S_PER_SIMULATED_S = {
     "deploy_array": 5.6,  # 11.2 s for 2 s
     "slider_crank": 21.0,  # 0.5 s for 0.024 s
@@ -43,10 +46,10 @@ INTEGRATE_S_PER_SIMULATED_S = {
 }
 # A run estimated to integrate longer than this needs --long-run [s].
 LONG_RUN_S = 900.0
-# A run estimated to integrate longer than this shows diffrax's progress bar on a terminal
-# [s]. Shorter runs go without: the bar is a host callback, which keeps the program out of
-# the program cache (jaxdeploy/_program_cache.py), and tracing would cost more than the bar
-# tells.
+# A run the probe estimates to integrate longer than this says so and shows diffrax's
+# progress bar on a terminal [s]. Shorter runs go without: the bar is a host callback, which
+# keeps the program out of the program cache (jaxdeploy/_program_cache.py), and tracing
+# would cost more than the bar tells.
 PROGRESS_BAR_S = 30.0
 
 
@@ -163,7 +166,7 @@ def _start_figures(scene):
 
 
 def _build_and_run(args, scene, params, control, t_end, out, drawing) -> int:
-    """build → plan → run and write, the figures drawn by `drawing`."""
+    """build → plan → probe → run and write, the figures drawn by `drawing`."""
     from ..mechanism import AssemblyError
     from . import _plan
     from ._phases import Phases
@@ -183,9 +186,119 @@ def _build_and_run(args, scene, params, control, t_end, out, drawing) -> int:
     except FileExistsError as err:
         return refuse(str(err))
     with folder:
+        beside = _reference_beside(args, scene, params, t_end, phases)
+        run = _metered(mechanism, initial)
+        try:
+            length = _probe(args, scene, params, control, t_end, run, phases, beside)
+        except _Refused as refused:
+            return refuse(str(refused))  # the folder is released as it was
         return _simulate(
-            args, scene, params, control, t_end, mechanism, initial, folder, phases, drawing
-        )
+            args, scene, params, control, t_end, mechanism, run, folder, phases, drawing,
+            beside, length,
+        )  # fmt: skip
+
+
+class _Metered(NamedTuple):
+    """The run as it integrates: `mechanism` with its energy meter where it allows one
+    (`balance_metered`: a plausibility check; the meter does not change how it steps), from
+    `initial`; `metered` the metered mechanism, or None."""
+
+    mechanism: object
+    initial: object
+    metered: object
+
+
+def _metered(mechanism, initial) -> _Metered:
+    from ..mechanism import balance_metered, balance_metered_state
+
+    metered = balance_metered(mechanism)
+    if metered is None:
+        return _Metered(mechanism, initial, None)
+    return _Metered(metered, balance_metered_state(metered, initial), metered)
+
+
+def _reference_beside(args, scene, params, t_end, phases):
+    """The ideal-joint reference made beside the run (`_ReferenceBeside`), or None when the
+    analysis uses none or --no-reference."""
+    import jax.numpy as jnp
+
+    from ..analysis import analysis_class
+
+    if (
+        analysis_class(scene).uses_reference
+        and scene.ideal_counterpart() is not None
+        and not args.no_reference
+    ):
+        # The saved times `simulate` makes for n_save (t0 = 0), checked against the run's own
+        # in `result`.
+        return _ReferenceBeside(scene, params, jnp.linspace(0.0, t_end, args.n_save), phases)
+    return None
+
+
+def _measured_by_table(scene, params, control) -> bool:
+    """Whether the scene's rate (`INTEGRATE_S_PER_SIMULATED_S`) was measured for this run:
+    the scene's default parameters, options and step control, so that only --t-end differs,
+    which the rate scales. Such a run is not probed: the probe's calls (each saves its
+    states) cost a default slider_crank 0.5 s beside its 1.3 s of integration (load ~10)."""
+    return (
+        scene.name in INTEGRATE_S_PER_SIMULATED_S
+        and params == scene.resolve_params({})
+        and scene.options == type(scene)().options
+        and control == scene.default_control
+    )
+
+
+def _probe(args, scene, params, control, t_end, run, phases, beside):
+    """The run's estimated integration time (`_run_length.estimate`, a `RunLength`, or None
+    when the probe failed, the run will say why, or was not needed: `_measured_by_table`),
+    measured by the run's own program over the
+    first parts of its horizon (it compiles the program the run then reuses; the reference
+    beside starts once it is traced, as it would for the run). Refuses (`_Refused`) a run
+    estimated past `LONG_RUN_S` without --long-run; says the estimate of a run past
+    `PROGRESS_BAR_S`."""
+    from .. import _program_cache
+    from ..simulation import simulate
+    from ..solvers import SolverChoiceWarning
+    from ..solvers.step_control import scene_default_choice
+    from . import _run_length
+    from ._phases import compile_seconds
+    from ._plan import duration_text
+
+    def prefix(t):
+        start = time.time()
+        with warnings.catch_warnings():
+            # A step control measured to be less accurate is said once, by the run.
+            warnings.simplefilter("ignore", SolverChoiceWarning)
+            trajectory = simulate(
+                run.mechanism, run.initial, t, n_save=args.n_save, control=control
+            )
+        stats = trajectory.stats
+        steps = int(stats["num_steps"]) + int(stats["num_rejected_steps"])
+        ok = bool(trajectory.ok)
+        end = time.time()
+        # Its first call compiles (or reads back) the program: not part of a run's length.
+        seconds = end - start - compile_seconds(start, end, threading.get_ident())
+        return _run_length.Prefix(t, max(seconds, 0.0), steps, ok)
+
+    if _measured_by_table(scene, params, control):
+        return None
+    label = "probe: the run over the first parts of its horizon, for its length"
+    with (
+        phases.phase("probe", label, split_compile=True),
+        _program_cache.when_traced(None if beside is None else beside.start),
+        scene_default_choice(control, scene.default_control),
+    ):
+        length = _run_length.estimate(prefix, t_end, short_s=PROGRESS_BAR_S)
+    if length is None or length.seconds <= PROGRESS_BAR_S:
+        return length
+    account = (
+        f"{scene.name} to --t-end = {t_end:g} s would integrate for about "
+        f"{duration_text(length.seconds)}: {length.account()}"
+    )
+    if length.seconds > LONG_RUN_S and not args.long_run:
+        raise _Refused(f"{account}; pass --long-run to start it anyway")
+    phases.say(f"probe: {account}")
+    return length
 
 
 class _Refused(ValueError):
@@ -343,33 +456,18 @@ def _while_running(mechanism, trajectory) -> dict:
 
 
 def _simulate(
-    args, scene, params, control, t_end, mechanism, initial, folder, phases, drawing
+    args, scene, params, control, t_end, mechanism, run, folder, phases, drawing, beside, length
 ) -> int:
-    import jax.numpy as jnp
-
     from .. import _program_cache
     from ..analysis import analysis_class, episodes_csv
     from ..analysis.plausibility import plausibility_checks, verdict
     from ..io import atomic_write_bytes, atomic_write_json, atomic_write_npz, strict_json
-    from ..mechanism import RevoluteClearance, balance_metered, balance_metered_state
+    from ..mechanism import RevoluteClearance
     from ..simulation import simulate
     from ..solvers.step_control import scene_default_choice
     from ._results import failed_run_summary, run_quantities, units_of
 
     analysis_type = analysis_class(scene)
-    beside = None
-    if (
-        analysis_type.uses_reference
-        and scene.ideal_counterpart() is not None
-        and not args.no_reference
-    ):
-        # The saved times `simulate` makes for n_save (t0 = 0), checked against the run's own
-        # in `result`.
-        beside = _ReferenceBeside(scene, params, jnp.linspace(0.0, t_end, args.n_save), phases)
-
-    # The run meters its energy balance where the mechanism allows it (a plausibility check;
-    # the meter does not change how it steps).
-    metered = balance_metered(mechanism)
     label = f"integrate to t_end = {t_end:g} s ({control.solver_name()})"
     with phases.phase("integrate", label, split_compile=True):
         with (
@@ -377,19 +475,19 @@ def _simulate(
             scene_default_choice(control, scene.default_control),
         ):
             trajectory = simulate(
-                mechanism if metered is None else metered,
-                initial if metered is None else balance_metered_state(metered, initial),
+                run.mechanism,
+                run.initial,
                 t_end,
                 n_save=args.n_save,
                 # diffrax's bar shows the simulated time as a percentage of t_end.
                 progress=not args.quiet
                 and sys.stderr.isatty()
-                and INTEGRATE_S_PER_SIMULATED_S.get(scene.name, math.inf) * t_end > PROGRESS_BAR_S,
+                and _estimated_seconds(scene, t_end, length) > PROGRESS_BAR_S,
                 control=control,
             )
         if beside is not None:
             beside.start()  # if the program cache did not (off, or the run not cacheable)
-        energy, trajectory = _energy_of(mechanism, metered, trajectory)
+        energy, trajectory = _energy_of(mechanism, run.metered, trajectory)
         # JAX has dispatched the run and returned: meanwhile, what does not need its result.
         versions = _while_running(mechanism, trajectory)
         trajectory.q.block_until_ready()
@@ -457,6 +555,13 @@ def _simulate(
             + "".join(f", {out}/{f}" for f in figures)
         )
     return _verdict_exit(summary["status"], trajectory)
+
+
+def _estimated_seconds(scene, t_end, length) -> float:
+    """The run's integration time [s]: the probe's estimate, else the scene's rate's."""
+    if length is not None:
+        return length.seconds
+    return INTEGRATE_S_PER_SIMULATED_S.get(scene.name, math.inf) * t_end
 
 
 def _energy_of(mechanism, metered, trajectory):
