@@ -34,6 +34,11 @@ Importing jaxdeploy switches JAX to float64: contact penetrations are micrometre
 move metres, and impact forces span ten decades, which float32 cannot resolve (diffrax's
 documentation, "How to choose a solver", asks for 64-bit below tolerances of ~1e-8).
 Simulation code assumes 64-bit throughout.
+
+Importing jaxdeploy also adds `--xla_cpu_use_fusion_emitters=false` to `XLA_FLAGS` while JAX's
+backend has not started: XLA then compiles the package's programs markedly faster, no slower to
+run (`jaxdeploy/_xla_flags.py` has the measurements). A value of that flag in `XLA_FLAGS` wins;
+`JAXDEPLOY_XLA_FLAGS=off` keeps XLA's default.
 """
 
 import importlib
@@ -42,9 +47,14 @@ from typing import TYPE_CHECKING
 
 import jax
 
+from . import _xla_flags
 from ._version import __version__
 
 jax.config.update("jax_enable_x64", True)
+
+# XLA:CPU's faster-compiling code generator, unless the user chose otherwise or JAX already
+# started (`_xla_flags`: what, when, and how to turn it off). Before anything compiles.
+_xla_flags.apply_defaults()
 
 if os.environ.get("JAXDEPLOY_CACHE_DIR", "").strip():
     # The variable asks for the caches in Python as on the command line (`enable_caches`;

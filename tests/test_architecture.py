@@ -20,6 +20,7 @@ FLOORS = {
     "_compilation_cache": 0,
     "_program_cache": 0,
     "_tracing": 0,
+    "_xla_flags": 0,
     "contact": 1,
     "mechanism": 2,
     "solvers": 3,
