@@ -49,6 +49,10 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 
+# Top level: jaxdeploy.fit (this package, which _derivative_tolerance's own imports load)
+# imports this module, so a function-level import here would hide that cycle.
+from ._derivative_tolerance import derivative_tolerance
+
 DEFAULT_STEPS = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
 DEFAULT_TOLERANCE = 1e-2
 KINDS = ("replay", "rerun")
@@ -272,7 +276,6 @@ def gradient_check(
     """
     import numpy as np
 
-    from ._derivative_tolerance import derivative_tolerance
     from ._derivatives import MODES, central_differences, difference_steps, parameter_gradient
 
     say = progress or (lambda _message: None)
