@@ -44,17 +44,12 @@ PROSE = {
 PENDING = {
     page: "not regenerated since its generator records provenance (make pages)"
     for page in (
-        "docs/deploy_array.md",
         "docs/design.md",
         "docs/generalized_alpha_error.md",
         "docs/identification.md",
-        "docs/output_extremes.md",
         "docs/paper_study.md",
-        "docs/restitution.md",
         "docs/robustness.md",
-        "docs/solver_by_tolerance.md",
         "docs/spectral_peak.md",
-        "docs/verification.md",
     )
 }
 
