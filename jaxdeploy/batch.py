@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .mechanism import balance_metered, balance_metered_state, without_balance_meter
 from .scenes.base import Scene
 from .simulation import Trajectory, simulate
 from .solvers import GeneralizedAlpha
@@ -73,6 +74,7 @@ def run_scene(
     ts=None,
     n_save: int = 1001,
     control: StepControl | Mapping | None = None,
+    energy_meter: bool = False,
     **simulate_options,
 ) -> Trajectory:
     """Simulate `scene` with `params` (a complete mapping, e.g. from `scene.resolve_params`).
@@ -81,11 +83,19 @@ def run_scene(
     `StepControl`, or a mapping of its fields overriding the scene's default
     (`step_control`); `simulate_options` go to `simulate` (e.g. `adjoint`, `progress`; a
     step setting such as `solver=` among them overrides `control`'s).
+
+    `energy_meter`: run the mechanism with its energy meter where it allows one
+    (`mechanism.balance_metered`, which changes no step): the trajectory's memory then ends
+    with the meter's, from which `mechanism.metered_balance` gives the run's energy balance
+    (`without_balance_meter` takes it out again). A mechanism the meter cannot meter
+    (`unmetered_because`) runs as it is.
     """
     t_end = scene.default_t_end if t_end is None else t_end
     control, options = _control_and_options(scene, control, simulate_options)
     mechanism = scene.build(params)
     initial = scene.initial_state(params, mechanism)
+    if energy_meter and (metered := balance_metered(mechanism)) is not None:
+        mechanism, initial = metered, balance_metered_state(metered, initial)
     with scene_default_choice(control, scene.default_control):
         return simulate(mechanism, initial, t_end, ts=ts, n_save=n_save, control=control, **options)
 
@@ -185,7 +195,13 @@ def batch_function(
     `Trajectory` (leading axis B), or `(trajectory, evaluate(params, trajectory))` when
     `evaluate` is given (per case, inside the same compiled program). Build it once and call it
     on many chunks: it compiles once per chunk shape and input sharding (inputs placed with a
-    `jax.sharding.NamedSharding` run sharded across devices).
+    `jax.sharding.NamedSharding` run sharded across devices). The end time and the saved
+    times are data of the program, not constants: `run(values, t_end=t, ts=times)` runs the
+    same compiled program over another horizon (`times` of the same length as `ts`; the
+    sweep's probe of its run length, `jaxdeploy.sweep`).
+
+    `energy_meter` (`run_scene`): each case runs with its energy meter where the mechanism
+    allows one; `evaluate` sees the trajectory without it.
 
     `group_size`: vmap over groups of that many cases, run one group after another inside the
     same compiled program (`jax.lax.map(..., batch_size=group_size)`; the last group may be
@@ -206,21 +222,42 @@ def batch_function(
     def params_of(varied_values):
         return {**shared, **dict(zip(varied, varied_values, strict=True))}
 
-    def one(varied_values):
+    def one(varied_values, horizon, times):
         params = params_of(varied_values)
-        trajectory = run_scene(scene, params, t_end, ts=ts, control=control, **simulate_options)
-        return trajectory if evaluate is None else (trajectory, evaluate(params, trajectory))
+        trajectory = run_scene(
+            scene, params, horizon, ts=times, control=control, **simulate_options
+        )
+        if evaluate is None:
+            return trajectory
+        plain = trajectory
+        if simulate_options.get("energy_meter") and balance_metered(scene.build(params)):
+            plain = without_balance_meter(trajectory)
+        return trajectory, evaluate(params, plain)
 
-    if group_size is None:
-        run = jax.vmap(one)
-    else:
-        run = lambda values: jax.lax.map(one, values, batch_size=group_size)  # noqa: E731
+    def run(values, horizon, times):
+        if group_size is None:
+            return jax.vmap(one, in_axes=(0, None, None))(values, horizon, times)
+        return jax.lax.map(lambda v: one(v, horizon, times), values, batch_size=group_size)
+
     if sharding is None:
-        return jax.jit(run)
-    cases = jax.sharding.PartitionSpec(*sharding.spec)
-    return jax.jit(
-        jax.shard_map(run, mesh=sharding.mesh, in_specs=cases, out_specs=cases, check_vma=False)
-    )
+        program = jax.jit(run)
+    else:
+        cases, whole = jax.sharding.PartitionSpec(*sharding.spec), jax.sharding.PartitionSpec()
+        program = jax.jit(
+            jax.shard_map(
+                run,
+                mesh=sharding.mesh,
+                in_specs=(cases, whole, whole),
+                out_specs=cases,
+                check_vma=False,
+            )
+        )
+    t_end, ts = jnp.asarray(t_end, dtype=float), jnp.asarray(ts, dtype=float)
+
+    def call(values, t_end=t_end, ts=ts):
+        return program(values, jnp.asarray(t_end, dtype=float), jnp.asarray(ts, dtype=float))
+
+    return call
 
 
 def check_policy(group_size) -> None:

@@ -174,6 +174,8 @@ def sweep(
     progress: bool = False,
     stop_after_chunks: int | None = None,
     seed: int | None = None,
+    energy_meter: bool = False,
+    probe: Callable | None = None,
 ) -> dict:
     """Run every case of `grid` (Cartesian product; see module docstring) into `out_dir`.
 
@@ -198,6 +200,16 @@ def sweep(
     - `save_trajectories`: store `q`, `v` at the saved times per case.
     - `stop_after_chunks`: stop (raise `KeyboardInterrupt`) after that many chunks of this call
       (tests of resume).
+    - `energy_meter`: run every case with its energy meter where its mechanism allows one
+      (`batch.run_scene`; no step changes): the trajectory `summarize` gets then ends its
+      memory with the meter's, for the case's energy balance (`mechanism.metered_balance`).
+    - `probe(run_to, chunks, cases)`: called once before the first chunk runs, with
+      `run_to(t) -> (steps, ok)`, which runs the first chunk still to do over [0, t] with the
+      sweep's compiled program (the end time is data: nothing compiles twice) and returns the
+      most steps (accepted and rejected) any of its cases took and whether any finished, and
+      the number of chunks and cases still to do. It may time the prefixes and refuse the
+      sweep by raising (`jaxdeploy sweep` estimates the sweep's time with it); nothing has
+      been written yet.
 
     **Returns:** the manifest (a dict).
 
@@ -217,8 +229,12 @@ def sweep(
         control=setup.control,
         evaluate=_wrap(evaluate),
         sharding=setup.sharding,
+        energy_meter=energy_meter,
         **_policy_options(setup.policy),
     )
+    if probe is not None and todo:
+        cases = sum(_chunk_range(setup, k)[1] - _chunk_range(setup, k)[0] for k in todo)
+        probe(_prefix_runner(run, setup, todo[0]), len(todo), cases)
     bar = _progress(
         progress, setup.n_cases, sum(c["stop"] - c["start"] for c in manifest["chunks"])
     )
@@ -344,15 +360,44 @@ def _chunks_to_run(out_dir: str, manifest: dict, setup: _Setup) -> list[int]:
     return [k for k in range(n_chunks) if k not in done]
 
 
+def _chunk_range(setup: _Setup, k: int) -> tuple[int, int]:
+    """`(start, stop)`: the cases of chunk `k`."""
+    return k * setup.chunk_size, min((k + 1) * setup.chunk_size, setup.n_cases)
+
+
+def _chunk_inputs(setup: _Setup, k: int):
+    """The varied parameters of chunk `k`'s cases, padded to the chunk size with copies of
+    its last case, placed on the devices."""
+    start, stop = _chunk_range(setup, k)
+    index = np.arange(start, stop)
+    padded = np.concatenate([index, np.full(setup.chunk_size - len(index), stop - 1)])
+    return tuple(_place(setup.table[name][padded], setup.sharding) for name in setup.varied)
+
+
+def _prefix_runner(run, setup: _Setup, k: int):
+    """`run_to(t) -> (steps, ok)`: chunk `k` over [0, t] (`sweep`'s `probe`), saving as many
+    states as the sweep does (the same program), over [0, t]."""
+    inputs = _chunk_inputs(setup, k)
+    n_save = int(setup.ts.shape[0])
+
+    def run_to(t: float) -> tuple[int, bool]:
+        trajectory, _ = run(inputs, t_end=t, ts=jnp.linspace(0.0, t, n_save))
+        result, steps = _gather((trajectory.result._value, trajectory.stats["num_steps"]))
+        # A vmapped loop steps until its slowest case is done: the chunk's cost is its most
+        # steps. A failed case stops early; the others go on.
+        return int(np.max(steps)), bool(np.any(np.asarray(result) == 0))
+
+    return run_to
+
+
 def _run_chunk(run, setup: _Setup, k: int, summarize, save_trajectories: bool):
     """Run chunk `k` (padded to the chunk size with copies of its last case); **returns**
     its manifest record and the arrays of its file."""
-    table, chunk_size = setup.table, setup.chunk_size
-    start, stop = k * chunk_size, min((k + 1) * chunk_size, setup.n_cases)
+    table = setup.table
+    start, stop = _chunk_range(setup, k)
     index = np.arange(start, stop)
-    padded = np.concatenate([index, np.full(chunk_size - len(index), stop - 1)])
     began = time.perf_counter()
-    inputs = tuple(_place(table[name][padded], setup.sharding) for name in setup.varied)
+    inputs = _chunk_inputs(setup, k)
     trajectory, feats = run(inputs)
     trajectory, feats = _gather((trajectory, feats))
     n = len(index)

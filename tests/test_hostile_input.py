@@ -247,33 +247,6 @@ def test_a_sweep_of_hours_needs_long_run(tmp_path, capsys):
     assert _entries(tmp_path) == []
 
 
-def test_a_sweep_of_several_chunks_is_timed_by_a_probe_before_it_starts(tmp_path, capsys):
-    out = tmp_path / "s"
-    code, err = _run(capsys, "sweep", "--scene", "pendulum", "--grid", "length=1:2:6",
-                     "--chunk-size", "2", "--t-end", "0.05", "--n-save", "3",
-                     "--no-trajectories", "--out", out)  # fmt: skip
-    assert code == 0
-    lines = err.splitlines()
-    probe = next(i for i, line in enumerate(lines) if line.startswith("probe: the first case"))
-    (estimate,) = [i for i, line in enumerate(lines) if line.startswith("sweep: 6 cases of")]
-    assert probe < estimate  # the estimate comes from the probe, before the batch
-    assert "the first case alone ran" in lines[estimate] and "× 6 cases" in lines[estimate]
-    assert json.loads((out / "manifest.json").read_text())["n_cases"] == 6
-
-
-def test_a_sweep_the_probe_times_past_15_minutes_needs_long_run(tmp_path, capsys, monkeypatch):
-    from jaxdeploy.commands import sweep
-
-    # The scene's rate allows it (1000 × 0.1 s × 0.3 s/s = 30 s); the probe says 1 s a case.
-    monkeypatch.setattr(sweep, "_probe_seconds", lambda plan, n_save, quiet: 1.0)
-    code, err = _run(capsys, "sweep", "--scene", "pendulum", "--grid", "length=1:2:1000",
-                     "--t-end", "0.1", "--out", tmp_path / "s")  # fmt: skip
-    assert code == 2
-    assert "1000 cases of pendulum to --t-end = 0.1 s: about 16.7 minutes" in err
-    assert "the first case alone ran 1 s" in err and "--long-run" in err
-    assert _entries(tmp_path) == []
-
-
 # --- a result folder belongs to one run ---------------------------------------------------
 
 

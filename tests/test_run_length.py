@@ -113,3 +113,55 @@ def test_a_short_run_says_nothing_of_its_length_and_records_the_probe(tmp_path, 
     default = ["simulate", "pendulum", "--t-end", "0.2", "--n-save", "3"]
     code = main([*default, "--out", str(tmp_path / "default")])
     assert code == 0 and "probe:" not in capsys.readouterr().err
+
+
+@pytest.mark.usefixtures("_no_persistent_caches")
+def test_ctrl_c_in_the_probe_is_one_line_exit_130_and_leaves_nothing(tmp_path, capsys, monkeypatch):
+    # The probe's first prefix is interrupted (a pendulum of another length: not the scene's
+    # defaults, so it is probed); the output folder is already taken then.
+    import jaxdeploy.simulation
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(jaxdeploy.simulation, "simulate", interrupted)
+    argv = ["simulate", "pendulum", "--t-end", "0.2", "--n-save", "3", "--set", "length=2"]
+    code = main([*argv, "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err
+    assert code == 130 and "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert lines[-2].startswith("probe: the run over the first parts of its horizon")
+    assert lines[-1] == "interrupted: jaxdeploy simulate stopped (Ctrl-C)"
+    assert os.listdir(tmp_path) == []  # no result, no staging folder, no lock
+
+
+def test_a_real_ctrl_c_during_the_probe_ends_with_one_line_and_exit_130(tmp_path):
+    """SIGINT to the program while it probes a run of tens of seconds (the pendulum in steps
+    of 1 µs): the signal handler's line, exit 130 (no traceback, no crash while XLA runs),
+    the output folder released as it was."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    command = [sys.executable, "-m", "jaxdeploy.cli", "simulate", "pendulum", "--dt", "1e-6",
+               "--t-end", "2", "--n-save", "3", "--out", str(tmp_path / "run")]  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": root, "JAXDEPLOY_CACHE_DIR": "off"}
+    proc = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, env=env)
+    seen = []
+    deadline = time.time() + 600
+    while time.time() < deadline:
+        line = proc.stderr.readline()
+        if not line:
+            break
+        seen.append(line)
+        if line.startswith("probe: the run over the first parts of its horizon"):
+            proc.send_signal(signal.SIGINT)
+            break
+    _, rest = proc.communicate(timeout=600)
+    err = "".join(seen) + rest
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "interrupted: jaxdeploy simulate stopped (Ctrl-C)"
+    assert "Traceback" not in err
+    assert os.listdir(tmp_path) == []

@@ -255,6 +255,33 @@ def energy_check(balance: dict | None, unmetered: str | None = None) -> Check:
     )
 
 
+def case_energy(mechanism, trajectory):
+    """`(energy, trajectory)` of a run of `mechanism` that ran with its energy meter where
+    the mechanism allows one (`mechanism.balance_metered`; a sweep's case,
+    `batch.run_scene(..., energy_meter=True)`): `energy()` its `energy_check` (value None,
+    saying why, when the mechanism cannot be metered), and the run as one of `mechanism`,
+    without the meter's memory. The balance compiles once per mechanism structure, not per
+    case (`_traced_numbers`)."""
+    from ..mechanism import (
+        balance_metered,
+        metered_balance,
+        unmetered_because,
+        without_balance_meter,
+    )
+
+    metered = balance_metered(mechanism)
+    memory = trajectory.memory
+    if metered is None or memory is None or len(memory) != len(metered.elements):
+        why = unmetered_because(mechanism) or "the run was not metered"
+        return (lambda: energy_check(None, why)), trajectory
+
+    def energy():
+        balance = metered_balance(_traced_numbers(metered), trajectory.q, trajectory.v, memory)
+        return energy_check(balance)
+
+    return energy, without_balance_meter(trajectory)
+
+
 def plausibility_checks(mechanism, trajectory, energy: Check | None = None) -> list[Check]:
     """Every plausibility check of a finished run (module docstring), passed or not;
     `energy` (`energy_check`) is added when given."""

@@ -75,6 +75,13 @@ SUMMARY_KEYS = (
     ),
     ("ideal_reference_status", "", "status of the ideal-joint reference run"),
     (
+        "energy_balance",
+        "-",
+        "a sweep case's energy-balance residual over the energy moved (the plausibility check "
+        "energy_balance, limit 3e-3; null where the mechanism cannot be metered, e.g. with a "
+        "driver, and for a failed case)",
+    ),
+    (
         "plausibility",
         "",
         "each plausibility check of the run (check, value, limit, unit, subject, passed; value "

@@ -190,8 +190,10 @@ def _distributed_from_environment() -> dict:
 
 def run(args) -> int:
     """validate → plan (estimates, the folder's lock) → run → write; every refusal (exit 2)
-    comes before anything is written or compiled (the ideal reference of an --objective is a
-    simulation: it comes after the checks)."""
+    comes before anything is written, and before anything is compiled but the one that needs
+    the compiled sweep: its run length, probed by the sweep's own program before the first
+    chunk (`_length_probe`). The ideal reference of an --objective is a simulation: it comes
+    after the checks."""
     import jax
 
     if args.distributed:
@@ -203,7 +205,6 @@ def run(args) -> int:
     try:
         plan = _validate(args)
         _plan_resources(args, plan)
-        _estimate_by_probe(args, plan)
         lock = _claim(plan.out)
     except (ValueError, FileExistsError) as err:
         refusal = str(err)
@@ -356,8 +357,13 @@ def _plan_resources(args, plan) -> None:
             _plan.check_tolerances(mechanism, plan.control)
     chunk = min(plan.chunk_size, plan.n_cases)
     collected = plan.n_cases if not args.no_trajectories else 0
+    from ..mechanism import balance_metered
+
+    # A chunk's cases run with their energy meter (`_run`), whose memory holds copies of q.
+    metered = balance_metered(mechanism) or mechanism
     _plan.check_memory(
-        _plan.saved_state_bytes(mechanism, args.n_save, runs=chunk + collected),
+        _plan.saved_state_bytes(metered, args.n_save, runs=chunk)
+        + _plan.saved_state_bytes(mechanism, args.n_save, runs=collected),
         f"--n-save = {args.n_save} saved states of {chunk} cases per chunk"
         + ("" if not collected else f" and the trajectories of all {collected} cases"),
         "lower --n-save or --chunk-size, or pass --no-trajectories",
@@ -385,70 +391,67 @@ def _check_duration(args, plan) -> None:
             )
 
 
-def _estimate_by_probe(args, plan) -> None:
-    """Time a sweep of more than one chunk before it starts (its progress bar's ETA comes only
-    after the first chunk): its first case run alone to --t-end (after its compile, which is
-    not counted), times the cases still to run, over the devices. Printed
-    (unless --quiet); refused (`ValueError`) past `simulate.LONG_RUN_S` without --long-run.
-    Run after the cheap checks (`_plan_resources`): the probe compiles one case's program.
+def _length_probe(args, plan):
+    """The sweep's `probe` (`jaxdeploy.sweep.sweep`): its run length measured as `simulate`
+    measures its own (`_run_length.estimate`), by the sweep's compiled program over growing
+    first parts of the horizon of the first chunk still to run, before that chunk runs; the
+    whole is that chunk's estimate times the chunks to run (each chunk runs as many steps
+    as its slowest case, and its cases run side by side). Refuses (`ValueError`, nothing
+    written) a sweep estimated past `simulate.LONG_RUN_S` without --long-run; says the
+    estimate of one past `simulate.PROGRESS_BAR_S`.
 
-    The estimate is of the order of the sweep's time, not a bound: a vmapped chunk costs
-    less per case than a case alone, but runs as many steps as its slowest case."""
+    Like simulate's, an extrapolation, not a bound: the other chunks' cases may step more or
+    less than the first chunk's. Compiling is not counted (the program is the sweep's own:
+    it compiles once, for the probe)."""
+    import threading
+    import time
+
+    from . import _run_length
+    from ._phases import Phases, compile_seconds
+    from ._plan import duration_text
+    from .simulate import LONG_RUN_S, PROGRESS_BAR_S
+
+    phases = Phases(quiet=args.quiet)
+
+    def probe(run_to, chunks: int, cases: int) -> None:
+        def prefix(t):
+            start = time.time()
+            steps, ok = run_to(t)
+            end = time.time()
+            seconds = end - start - compile_seconds(start, end, threading.get_ident())
+            return _run_length.Prefix(t, _agreed(max(seconds, 0.0)), steps, ok)
+
+        label = "probe: the first chunk over the first parts of its horizon, for the sweep's length"
+        with phases.phase("probe", label, split_compile=True):
+            length = _run_length.estimate(prefix, plan.t_end, short_s=PROGRESS_BAR_S / chunks)
+        if length is None:  # every case of the chunk failed: the sweep says why
+            return
+        seconds = length.seconds * chunks
+        if seconds <= PROGRESS_BAR_S:
+            return
+        account = (
+            f"{cases} cases of {plan.scene.name} to --t-end = {plan.t_end:g} s would run for "
+            f"about {duration_text(seconds)}, {chunks} chunk(s) each as long as the first (its "
+            f"slowest case: {length.account()})"
+        )
+        if seconds > LONG_RUN_S and not args.long_run:
+            raise ValueError(f"{account}; pass --long-run to start it anyway")
+        phases.say(f"sweep: {account}")
+
+    return probe
+
+
+def _agreed(seconds: float) -> float:
+    """Process 0's `seconds` in every process of a `--distributed` run: each decides from
+    the same times, so all run the same prefixes and reach the same verdict."""
     import jax
 
-    from ._plan import duration_text
-    from .simulate import LONG_RUN_S
+    if jax.process_count() == 1:
+        return seconds
+    import numpy as np
+    from jax.experimental import multihost_utils
 
-    remaining = plan.n_cases - _cases_done(args, plan)
-    if remaining <= plan.chunk_size:
-        # One chunk: the sweep is its own first chunk, which the probe would only precede
-        # (the scene's rate, `_check_duration`, has bounded it already).
-        return
-    seconds = _probe_seconds(plan, args.n_save, quiet=args.quiet)
-    estimate = seconds * remaining / jax.device_count()
-    account = (
-        f"{remaining} cases of {plan.scene.name} to --t-end = {plan.t_end:g} s: about "
-        f"{duration_text(estimate)} (the first case alone ran {duration_text(seconds)} after "
-        f"compiling, × {remaining} cases / {jax.device_count()} device(s))"
-    )
-    if estimate > LONG_RUN_S and not args.long_run:
-        raise ValueError(f"{account}; pass --long-run to start it anyway")
-    if not args.quiet:
-        print(f"sweep: {account}", file=sys.stderr, flush=True)
-
-
-def _cases_done(args, plan) -> int:
-    """Cases a --resume finds finished (0 for a new sweep)."""
-    if not args.resume:
-        return 0
-    import json
-
-    try:
-        with open(os.path.join(plan.out, "manifest.json")) as fh:
-            chunks = json.load(fh).get("chunks", [])
-        return sum(int(c["stop"]) - int(c["start"]) for c in chunks)
-    except (OSError, ValueError, KeyError, TypeError):
-        return 0  # the sweep itself reports a damaged manifest
-
-
-def _probe_seconds(plan, n_save: int, quiet: bool) -> float:
-    """Wall seconds of the sweep's first case simulated alone (its step control, saved
-    times and end time), compile excluded (`_phases`)."""
-    from ..batch import step_control
-    from ..simulation import simulate
-    from ._phases import Phases
-
-    scene = plan.scene
-    params = scene.resolve_params({**plan.fixed, **{k: v[0] for k, v in plan.grid.items()}})
-    phases = Phases(quiet=quiet)
-    label = "probe: the first case alone, for the sweep's time estimate"
-    with phases.phase("probe", label, split_compile=True):
-        mechanism = scene.build(params)
-        initial = scene.initial_state(params, mechanism)
-        control = step_control(scene, plan.control)
-        trajectory = simulate(mechanism, initial, plan.t_end, n_save=n_save, control=control)
-        trajectory.q.block_until_ready()
-    return phases.durations["probe_s"]
+    return float(multihost_utils.broadcast_one_to_all(np.float64(seconds)))
 
 
 def _summarizer(plan):
@@ -458,7 +461,7 @@ def _summarizer(plan):
     import numpy as np
 
     from ..analysis import analysis_class
-    from ..analysis.plausibility import plausibility_checks, verdict
+    from ..analysis.plausibility import case_energy, plausibility_checks, verdict
     from ..batch import reference_run
     from . import _reference_cache
     from ._results import run_quantities
@@ -479,16 +482,22 @@ def _summarizer(plan):
         return run
 
     def summarize(params, trajectory):
+        # The case ran with its energy meter where its mechanism allows one (`_run`).
+        mechanism = scene.build(params)
+        energy, trajectory = case_energy(mechanism, trajectory)
         quantities = run_quantities(trajectory)
         if not trajectory.ok:
             # States past the failure are NaN and extremes may be those of a diverging
             # force: nothing more to report than the status and the steps.
-            return quantities
+            return {**quantities, "energy_balance": None}
         reference = reference_for(params, trajectory)
-        mechanism = scene.build(params)
         analysis = analysis_type(scene, params, mechanism, trajectory, reference)
         quantities.update(analysis.summary())
-        quantities["status"] = verdict(trajectory, plausibility_checks(mechanism, trajectory))
+        check = energy()
+        quantities["status"] = verdict(
+            trajectory, plausibility_checks(mechanism, trajectory, check)
+        )
+        quantities["energy_balance"] = check.value
         return quantities
 
     return summarize
@@ -532,6 +541,8 @@ def _run(args, plan) -> dict:
         summarize=_summarizer(plan),
         save_trajectories=not args.no_trajectories,
         progress=not args.quiet,
+        energy_meter=True,
+        probe=_length_probe(args, plan),
     )
 
 
