@@ -204,9 +204,10 @@ def sweep(
       (`batch.run_scene`; no step changes): the trajectory `summarize` gets then ends its
       memory with the meter's, for the case's energy balance (`mechanism.metered_balance`).
     - `probe(run_to, chunks, cases)`: called once before the first chunk runs, with
-      `run_to(t) -> (steps, ok)`, which runs the first chunk still to do over [0, t] with the
-      sweep's compiled program (the end time is data: nothing compiles twice) and returns the
-      most steps (accepted and rejected) any of its cases took and whether any finished, and
+      `run_to(t) -> (steps, ok, case)`, which runs the first chunk still to do over [0, t]
+      with the sweep's compiled program (the end time is data: nothing compiles twice) and
+      returns the most steps (accepted and rejected) any of its cases took, whether any
+      finished, and its first case as `(params, trajectory)` (what `summarize` gets), and
       the number of chunks and cases still to do. It may time the prefixes and refuse the
       sweep by raising (`jaxdeploy sweep` estimates the sweep's time with it); nothing has
       been written yet.
@@ -380,12 +381,20 @@ def _prefix_runner(run, setup: _Setup, k: int):
     inputs = _chunk_inputs(setup, k)
     n_save = int(setup.ts.shape[0])
 
-    def run_to(t: float) -> tuple[int, bool]:
+    def run_to(t: float) -> tuple[int, bool, tuple]:
         trajectory, _ = run(inputs, t_end=t, ts=jnp.linspace(0.0, t, n_save))
-        result, steps = _gather((trajectory.result._value, trajectory.stats["num_steps"]))
+        trajectory = _gather(trajectory)
+        result, steps = np.asarray(trajectory.result._value), trajectory.stats["num_steps"]
+        # The chunk's first case as `summarize` gets it (its host work is part of a case's
+        # cost too).
+        first = int(_chunk_range(setup, k)[0])
+        case = (
+            {name: float(setup.table[name][first]) for name in setup.table},
+            jax.tree.map(lambda leaf: leaf[0], trajectory),
+        )
         # A vmapped loop steps until its slowest case is done: the chunk's cost is its most
         # steps. A failed case stops early; the others go on.
-        return int(np.max(steps)), bool(np.any(np.asarray(result) == 0))
+        return int(np.max(steps)), bool(np.any(result == 0)), case
 
     return run_to
 

@@ -82,6 +82,7 @@ def test_the_sweep_says_its_estimate_from_its_own_program_before_the_first_chunk
     assert "to --t-end = 1 s would run for about" in line
     assert "2 chunk(s) each as long as the first" in line
     assert "steps per simulated second" in line  # simulate's account of its prefixes
+    assert line.endswith("per case for its summary")  # the host work after each chunk
     assert len(stored) == 2
     manifest = json.loads((out / "manifest.json").read_text())
     assert [c["stop"] - c["start"] for c in manifest["chunks"]] == [1, 1]

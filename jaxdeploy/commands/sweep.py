@@ -391,14 +391,18 @@ def _check_duration(args, plan) -> None:
             )
 
 
-def _length_probe(args, plan):
+def _length_probe(args, plan, summarize):
     """The sweep's `probe` (`jaxdeploy.sweep.sweep`): its run length measured as `simulate`
     measures its own (`_run_length.estimate`), by the sweep's compiled program over growing
     first parts of the horizon of the first chunk still to run, before that chunk runs; the
     whole is that chunk's estimate times the chunks to run (each chunk runs as many steps
     as its slowest case, and its cases run side by side). Refuses (`ValueError`, nothing
     written) a sweep estimated past `simulate.LONG_RUN_S` without --long-run; says the
-    estimate of one past `simulate.PROGRESS_BAR_S`.
+    estimate of one past `simulate.PROGRESS_BAR_S`. Each case's summary (`summarize`, host
+    work after its chunk: the analysis, the plausibility checks) is timed on the last
+    prefix's first case and added per case: for a cheap scene it is most of a case's cost
+    (10,000 pendulum cases to 0.2 s: 0.5 s of integration and ~5 s of summaries per chunk
+    of 64, load ~15).
 
     Like simulate's, an extrapolation, not a bound: the other chunks' cases may step more or
     less than the first chunk's. Compiling is not counted (the program is the sweep's own:
@@ -413,26 +417,39 @@ def _length_probe(args, plan):
 
     phases = Phases(quiet=args.quiet)
 
+    def timed(work):
+        """`(seconds, result)` of `work()`, compiling not counted."""
+        start = time.time()
+        result = work()
+        end = time.time()
+        seconds = end - start - compile_seconds(start, end, threading.get_ident())
+        return _agreed(max(seconds, 0.0)), result
+
     def probe(run_to, chunks: int, cases: int) -> None:
+        last = []
+
         def prefix(t):
-            start = time.time()
-            steps, ok = run_to(t)
-            end = time.time()
-            seconds = end - start - compile_seconds(start, end, threading.get_ident())
-            return _run_length.Prefix(t, _agreed(max(seconds, 0.0)), steps, ok)
+            seconds, (steps, ok, case) = timed(lambda: run_to(t))
+            last[:] = [case]
+            return _run_length.Prefix(t, seconds, steps, ok)
 
         label = "probe: the first chunk over the first parts of its horizon, for the sweep's length"
         with phases.phase("probe", label, split_compile=True):
             length = _run_length.estimate(prefix, plan.t_end, short_s=PROGRESS_BAR_S / chunks)
-        if length is None:  # every case of the chunk failed: the sweep says why
-            return
-        seconds = length.seconds * chunks
+            if length is None:  # every case of the chunk failed: the sweep says why
+                return
+            # Its second summary: the first one compiles and makes what cases share (the
+            # ideal-joint reference of deploy_array).
+            summarize(*last[0])
+            per_case, _ = timed(lambda: summarize(*last[0]))
+        seconds = length.seconds * chunks + per_case * cases
         if seconds <= PROGRESS_BAR_S:
             return
         account = (
             f"{cases} cases of {plan.scene.name} to --t-end = {plan.t_end:g} s would run for "
-            f"about {duration_text(seconds)}, {chunks} chunk(s) each as long as the first (its "
-            f"slowest case: {length.account()})"
+            f"about {duration_text(seconds)}: {chunks} chunk(s) each as long as the first (its "
+            f"slowest case: {length.account()}) and {duration_text(per_case)} per case for its "
+            "summary"
         )
         if seconds > LONG_RUN_S and not args.long_run:
             raise ValueError(f"{account}; pass --long-run to start it anyway")
@@ -507,6 +524,7 @@ def _run(args, plan) -> dict:
     """Run (or resume) the sweep; returns its manifest."""
     from ..sweep import sweep
 
+    summarize = _summarizer(plan)
     evaluate, features = None, None
     if plan.objective is not None:
         from ..optimize import DesignProblem
@@ -538,11 +556,11 @@ def _run(args, plan) -> dict:
         resume=args.resume,
         evaluate=evaluate,
         features=features,
-        summarize=_summarizer(plan),
+        summarize=summarize,
         save_trajectories=not args.no_trajectories,
         progress=not args.quiet,
         energy_meter=True,
-        probe=_length_probe(args, plan),
+        probe=_length_probe(args, plan, summarize),
     )
 
 
