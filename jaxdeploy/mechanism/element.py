@@ -54,6 +54,11 @@ class AbstractElement(eqx.Module):
     has_memory: ClassVar[bool] = False
     has_internal_state: ClassVar[bool] = False
     switch_flags: ClassVar[tuple[str, ...]] = ()
+    # An instrument that follows other elements' memories (`meters.BalanceMeter`): the
+    # mechanism updates its memory after theirs and hands it their updated memories
+    # (`memory_for_step_beside`, `memory_after_step_beside`), so it does not repeat their
+    # updates (a clearance joint's is a root search on the step's interpolant).
+    reads_memories: ClassVar[bool] = False
 
     def constraint(self, kin: Kinematics, t) -> Array:
         return jnp.zeros((0,), dtype=kin.q.dtype)

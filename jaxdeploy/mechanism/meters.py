@@ -138,6 +138,14 @@ class EnergyMeter(AbstractElement):
 
     def memory_for_step(self, memory, kin: Kinematics):
         inner = self._inner_memory("memory_for_step", memory["inner"], kin)
+        return self.for_step(memory, kin, inner)
+
+    def memory_after_step(self, memory, kin: Kinematics, step):
+        inner = self._inner_memory("memory_after_step", memory["inner"], kin, step)
+        return self.after_step(memory, kin, inner)
+
+    def for_step(self, memory, kin: Kinematics, inner):
+        """`memory_for_step` given the inner element's memory for the step, `inner`."""
         return {
             "inner": inner,
             "q_start": kin.q,
@@ -146,11 +154,11 @@ class EnergyMeter(AbstractElement):
             "injected": memory["injected"] + self._jump(kin, memory["inner"], inner),
         }
 
-    def memory_after_step(self, memory, kin: Kinematics, step):
+    def after_step(self, memory, kin: Kinematics, inner):
+        """`memory_after_step` given the inner element's memory after the step, `inner`."""
         step_memory = memory["inner"]
         force_end = self._nonconservative_force(kin, step_memory)
         work = 0.5 * jnp.dot(memory["force_start"] + force_end, kin.q - memory["q_start"])
-        inner = self._inner_memory("memory_after_step", step_memory, kin, step)
         return {
             "inner": inner,
             "q_start": memory["q_start"],
@@ -173,11 +181,20 @@ class BalanceMeter(AbstractElement):
     updates from the same states. It adds no force, no constraint, no event and no coupling,
     so the run steps exactly as without it. See `balance_metered`.
 
-    **Arguments:** `meters`: an `EnergyMeter` per metered element.
+    Each meter's copy of its element's memory (`"inner"`) is the element's own, handed over
+    by the mechanism after it updated it (`reads_memories`), not updated a second time: the
+    meter's part of a step is then the forces and potentials it meters alone (a second
+    clearance-joint update, a root search on the step's interpolant, had doubled the size of
+    deploy_array's compiled run).
+
+    **Arguments:** `meters`: an `EnergyMeter` per metered element; `indices`: each metered
+    element's index in the mechanism.
     """
 
     meters: tuple
+    indices: tuple[int, ...] = eqx.field(static=True)
     has_memory: ClassVar[bool] = True
+    reads_memories: ClassVar[bool] = True
 
     def bodies(self):
         return ()
@@ -188,12 +205,19 @@ class BalanceMeter(AbstractElement):
     def init_memory(self, kin: Kinematics):
         return tuple(m.init_memory(kin) for m in self.meters)
 
-    def memory_for_step(self, memory, kin: Kinematics):
-        return tuple(m.memory_for_step(x, kin) for m, x in zip(self.meters, memory, strict=True))
-
-    def memory_after_step(self, memory, kin: Kinematics, step):
+    def memory_for_step_beside(self, memory, kin: Kinematics, updated):
+        """`memory_for_step`, the metered elements' memories for the step in `updated` (the
+        mechanism's, by element index)."""
         return tuple(
-            m.memory_after_step(x, kin, step) for m, x in zip(self.meters, memory, strict=True)
+            m.for_step(x, kin, updated[i])
+            for m, x, i in zip(self.meters, memory, self.indices, strict=True)
+        )
+
+    def memory_after_step_beside(self, memory, kin: Kinematics, step, updated):
+        """`memory_after_step`, the metered elements' memories after the step in `updated`."""
+        return tuple(
+            m.after_step(x, kin, updated[i])
+            for m, x, i in zip(self.meters, memory, self.indices, strict=True)
         )
 
     def switched(self, before, after):
@@ -201,7 +225,10 @@ class BalanceMeter(AbstractElement):
         return jnp.array(False)
 
     def idealized(self):
-        return BalanceMeter(tuple(m.idealized() for m in self.meters))
+        # A metered clearance joint idealizes to a revolute joint, which does no work: no meter.
+        kept = [(m.idealized(), i) for m, i in zip(self.meters, self.indices, strict=True)]
+        kept = [(m, i) for m, i in kept if isinstance(m, EnergyMeter)]
+        return BalanceMeter(tuple(m for m, _ in kept), tuple(i for _, i in kept))
 
 
 def balance_metered(mechanism: Mechanism) -> Mechanism | None:
@@ -210,8 +237,8 @@ def balance_metered(mechanism: Mechanism) -> Mechanism | None:
     energies: `metered_balance`."""
     if unmetered_because(mechanism) is not None:
         return None
-    forces = [e for e in mechanism.elements if not e.n_constraints]
-    meter = BalanceMeter(tuple(EnergyMeter(e) for e in forces))
+    forces = [i for i, e in enumerate(mechanism.elements) if not e.n_constraints]
+    meter = BalanceMeter(tuple(EnergyMeter(mechanism.elements[i]) for i in forces), tuple(forces))
     return Mechanism(mechanism.bodies, (*mechanism.elements, meter), mechanism.ground_points)
 
 

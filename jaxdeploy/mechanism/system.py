@@ -242,21 +242,32 @@ class Mechanism(eqx.Module):
         kin = self.kinematics(q, v)
         return tuple(e.init_memory(kin) if e.has_memory else None for e in self.elements)
 
-    def memory_for_step(self, memory, q, v):
+    def memory_for_step(self, memory, q, v, instruments: bool = True):
+        """Memory used throughout the step that starts at `(q, v)`. `instruments=False`
+        leaves the memory of elements that only watch the others (`reads_memories`: an
+        energy meter) as it is, for a caller that needs the memory the dynamics use alone."""
         kin = self.kinematics(q, v)
-        return tuple(
-            e.memory_for_step(m, kin) if e.has_memory else None
+        updated = [
+            e.memory_for_step(m, kin) if e.has_memory and not e.reads_memories else m
             for e, m in zip(self.elements, memory, strict=True)
-        )
+        ]
+        for i, e in enumerate(self.elements):
+            if e.reads_memories and instruments:
+                updated[i] = e.memory_for_step_beside(memory[i], kin, tuple(updated))
+        return tuple(updated)
 
     @traced_once
     def memory_after_step(self, memory, q, v, step):
         """Memory after an accepted step of length `step` (s) that ended at `(q, v)`."""
         kin = self.kinematics(q, v)
-        return tuple(
-            e.memory_after_step(m, kin, step) if e.has_memory else None
+        updated = [
+            e.memory_after_step(m, kin, step) if e.has_memory and not e.reads_memories else m
             for e, m in zip(self.elements, memory, strict=True)
-        )
+        ]
+        for i, e in enumerate(self.elements):
+            if e.reads_memories:
+                updated[i] = e.memory_after_step_beside(memory[i], kin, step, tuple(updated))
+        return tuple(updated)
 
     def event_fraction(self, memory):
         """The earliest event inside the last accepted step, as a fraction of the step (≥ 1:

@@ -281,8 +281,9 @@ class MechanismODESolver(dfx.AbstractAdaptiveSolver):
         # (`memory_for_step` is what the next step computes first): they are the output at t1
         # and, for a first-same-as-last method (Tsit5, Kvaerno5), the next step's first
         # stage. The inner solver's own last stage cannot serve: it was taken before the
-        # projection and with this step's memory.
-        memory_next = mech.memory_for_step(memory1, q1, v1)
+        # projection and with this step's memory. Instruments (an energy meter) have no part
+        # in the accelerations: their memory for the step is the next step's business.
+        memory_next = mech.memory_for_step(memory1, q1, v1, instruments=False)
         qdd1, lam1 = stabilised_accelerations(
             mech, q1, v1, t1, memory_next, self.baumgarte, self.linear_solve
         )
