@@ -182,13 +182,15 @@ class DesignProblem:
             )
         return {**self.fixed, **x}
 
-    def deployment(self, x: Mapping, trajectory=None):
-        """`(Deployment, trajectory)` for design x (runs the simulation unless given)."""
+    def deployment(self, x: Mapping, trajectory=None, control=None):
+        """`(Deployment, trajectory)` for design x (runs the simulation unless given, with
+        `control` if given, else the problem's; the ideal reference stays the problem's)."""
         params = self.params(x)
         if trajectory is None:
             options = {} if self.adjoint is None else {"adjoint": self.adjoint}
+            control = self.control if control is None else control
             trajectory = run_scene(
-                self.scene, params, self.t_end, ts=self.ts, control=self.control, **options
+                self.scene, params, self.t_end, ts=self.ts, control=control, **options
             )
         mechanism = self.scene.build(params)
         channels = self.scene.channels(mechanism, trajectory)
@@ -198,10 +200,11 @@ class DesignProblem:
         }
         return Deployment(self.ts, self.lock_time, channels, self.ideal, events), trajectory
 
-    def evaluate(self, x: Mapping):
+    def evaluate(self, x: Mapping, control=None):
         """`(J, parts, ok)`: the objective, each term's feature, and the run's success flag
-        (traceable in x)."""
-        dep, trajectory = self.deployment(x)
+        (traceable in x; the design run with `control` if given, a `StepControl` whose
+        tolerances may be traced: `optimize(..., control=...)`)."""
+        dep, trajectory = self.deployment(x, control=control)
         ok = trajectory.result == dfx.RESULTS.successful
         return self.objective(dep), self.objective.parts(dep), ok
 
@@ -361,6 +364,9 @@ class OptimizeResult:
     # "ok", or why the run stopped short (an iteration whose simulation, objective or gradient
     # was not finite: the last iterate is then that failed one).
     status: str = "ok"
+    # The step tolerance search's record (`fit.DerivativeTolerance`) when `optimize` chose
+    # the tolerance at which its pathwise gradient is converged; None otherwise.
+    step_tolerance: object = None
 
     @property
     def best(self) -> int | None:
@@ -390,6 +396,7 @@ class OptimizeResult:
             "last": self.x[-1] if self.x else None,
             "last_objective": self.objective[-1] if self.x else None,
             "stochastic": self.stochastic,
+            "step_tolerance": self.step_tolerance and self.step_tolerance.to_json(),
             "history": [
                 {
                     "iteration": i,
@@ -416,6 +423,9 @@ def optimize(
     smoothing: Scatter | None = None,
     callback: Callable | None = None,
     mode: str = "reverse",
+    control: StepControl | None = None,
+    derivative_change: float | None = None,
+    progress: Callable | None = None,
 ) -> OptimizeResult:
     """Minimise over the box `bounds` from `x0` by gradient steps in the reparametrised u
     (module docstring), with optax.
@@ -437,6 +447,18 @@ def optimize(
       default) or `"forward"` (`jax.jacfwd`, one tangent per parameter; the loss's runs may
       use `diffrax.ForwardMode()`, which reverse mode cannot differentiate).
       `jaxdeploy.fit.gradient_mode` gives the cheaper one for a parameter count.
+    - `control` (pathwise only): a `StepControl`; `loss` is then called as `loss(x, control)`
+      (as `DesignProblem.evaluate`), the control's tolerances data of the compiled gradient
+      (`solvers.tolerances_as_data`: one program whatever the tolerance).
+    - `derivative_change` (with `control`): first choose the step tolerance at which the
+      gradient at `x0` is converged, the loosest rtol from `control`'s down whose gradient
+      changes by at most this fraction at rtol/10 (`fit.converged_tolerance`, the rule
+      `fit.derivative_tolerance` and `jaxdeploy gradcheck` use; its record in
+      `result.step_tolerance`), and optimise at it: a derivative through an adaptive run
+      needs a tighter tolerance than its value (deploy_array's lock time at rtol 1e-6: AD
+      0.8 % off in the clearance). Each tighter tolerance tried costs one gradient
+      evaluation, no compile. None: optimise at `control` as given.
+    - `progress(message)`: told each step of the tolerance search.
 
     **Returns:** `OptimizeResult`; `.optimum` is the best successful iterate (lowest J),
     `.status` "ok" or, when an iteration's simulation, J or gradient is not finite, a message
@@ -454,28 +476,29 @@ def optimize(
     )
 
     if smoothing is None:
-
-        def reduced(u):
-            out = loss(box.to_params(u))
-            if not isinstance(out, tuple):
-                out = (out, {}, jnp.asarray(True))
-            value, parts, ok = out
-            return value, (parts, ok)
-
         if mode not in ("reverse", "forward"):
             raise ValueError(f"mode = {mode!r} is invalid; valid: reverse, forward")
-        value_and_grad = jax.jit(_value_and_grad(reduced, mode))
+        if control is None:
+            value_and_grad = jax.jit(_value_and_grad(_reduced(loss, box), mode))
+        else:
+            value_and_grad, step_tolerance = _at_converged_tolerance(
+                loss, box, x0, mode, control, derivative_change, progress
+            )
     else:
         unknown = [n for n in smoothing.names if n not in (*box.names, *smoothing.nominal)]
         if unknown:
             raise ValueError(
                 f"smoothing: {unknown[0]!r} is neither a design parameter nor in its nominal"
             )
+        if control is not None:
+            raise ValueError("control is for pathwise gradients (smoothing=None)")
         rng = np.random.default_rng(smoothing.seed)
 
     u = box.from_params(x0)
     state = optimizer.init(u)
     result = OptimizeResult(box.names, stochastic=smoothing is not None)
+    if smoothing is None and control is not None:
+        result.step_tolerance = step_tolerance
     for i in range(steps):
         start = time.perf_counter()
         x = {k: float(v) for k, v in x_of_u(u).items()}
@@ -517,6 +540,47 @@ def optimize(
         updates, state = optimizer.update(jnp.asarray(grad_u), state, u)
         u = optax.apply_updates(u, updates)
     return result
+
+
+def _reduced(loss: Callable, box: Box) -> Callable:
+    """`(u, [c]) ↦ (J, (parts, ok))` of `loss(x(u)[, c])` returning J or `(J, parts, ok)`."""
+
+    def reduced(u, *c):
+        out = loss(box.to_params(u), *c)
+        if not isinstance(out, tuple):
+            out = (out, {}, jnp.asarray(True))
+        value, parts, ok = out
+        return value, (parts, ok)
+
+    return reduced
+
+
+def _at_converged_tolerance(loss, box, x0, mode, control, fraction, progress):
+    """`(value_and_grad, tolerance)`: `u ↦ ((J, (parts, ok)), ∂J/∂u)` of `loss(x, control)`
+    at the step control chosen by `fit.converged_tolerance` from `control` (at `x0`), or at
+    `control` when `fraction` is None (`tolerance` then None); one compiled program for every
+    tolerance tried and the optimisation."""
+    from functools import partial
+
+    from .fit import converged_tolerance
+    from .solvers import tolerances_as_data
+
+    reduced = _reduced(loss, box)
+
+    def gradient_at(c, u):
+        return _value_and_grad(lambda v: reduced(v, c), mode)(u)
+
+    program = tolerances_as_data(gradient_at)
+    if fraction is None:
+        return partial(program, control), None
+    u0 = box.from_params(x0)
+
+    def gradient(c):
+        _, grad_u = program(c, u0)
+        return dict(zip(box.names, map(float, np.asarray(grad_u)), strict=True))
+
+    found = converged_tolerance(gradient, control, fraction=fraction, progress=progress)
+    return partial(program, found.control), found
 
 
 def _value_and_grad(reduced: Callable, mode: str) -> Callable:

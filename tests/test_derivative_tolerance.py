@@ -65,3 +65,34 @@ def test_fixed_steps_and_a_bad_fraction():
     assert found.met is None and asked == [None] and "not checked" in found.summary()
     with pytest.raises(ValueError, match="fraction"):
         converged_tolerance(evaluate, StepControl("tsit5", rtol=1e-6), fraction=0.0)
+
+
+def test_tolerances_are_data_of_one_derivative_program():
+    """`fit.gradient_at_tolerances` (what `derivative_tolerance` searches with): controls that
+    differ only in rtol and atol run one compiled derivative program, give the derivative of
+    `parameter_gradient` at that control, and each its own (the tolerance is not frozen into
+    the program at its first value). Pendulum with adaptive Tsit5 steps (cheap)."""
+    import jax.numpy as jnp
+
+    from jaxdeploy.fit import gradient_at_tolerances, parameter_gradient
+    from jaxdeploy.scenes import Pendulum
+
+    scene = Pendulum()
+    params = scene.resolve_params({"initial_angle": -0.4})
+
+    def loss(outputs):
+        return jnp.sum(outputs["rod_theta"] ** 2)
+
+    options = dict(n_save=11, mode="forward")
+    evaluate = gradient_at_tolerances(scene, params, ["length"], loss, 0.4, **options)
+    loose, tight = (StepControl("tsit5", rtol=r, atol=1e-3 * r) for r in (1e-3, 1e-5))
+    value_loose, grad_loose = evaluate(loose)
+    value_tight, grad_tight = evaluate(tight)
+    assert len(evaluate.programs) == 1
+    assert next(iter(evaluate.programs.values()))._cache_size() == 1
+    reference = parameter_gradient(scene, params, ["length"], loss, 0.4, control=tight, **options)
+    assert float(value_tight) == pytest.approx(float(reference[0]), rel=1e-13)
+    assert float(grad_tight["length"]) == pytest.approx(float(reference[1]["length"]), rel=1e-12)
+    # The loose run's derivative is its own: off the tight one by its tolerance error.
+    change = abs(float(grad_loose["length"]) / float(grad_tight["length"]) - 1)
+    assert 1e-9 < change < 1e-1

@@ -209,3 +209,58 @@ def test_a_capped_continuation_stage_does_not_make_the_fit_unconverged(tmp_path)
     assert not result.stages[0]["converged"] and result.stages[1]["converged"]
     assert result.converged
     assert abs(result.estimates["length"] - 0.8) < 3 * result.standard_errors["length"]
+
+
+def test_tolerance_check_measures_the_jacobian_at_the_tighter_tolerance():
+    """`tolerance_check` evaluates the fit's compiled model at rtol/10 (its tolerance is data:
+    no compile) for the channels and their Jacobian: `jacobian_change` and the standard
+    errors there. Checked against central differences of plain runs at the tighter tolerance
+    (not AD): the standard error there is 1/|∂r/∂L| (one parameter, noise given). A result
+    whose Jacobian has not converged is flagged and refitted at a tighter tolerance."""
+    import dataclasses
+
+    from jaxdeploy.fit import JACOBIAN_CHANGE, Comparison, ResidualSpec, run_channels
+
+    scene = Pendulum()
+    truth = {"length": 0.8, "initial_angle": -0.6}
+    t = np.linspace(0.0, 1.0, 101)
+    data = synthesize(scene, truth, t, ["rod_theta"], seed=4, noise_fraction=1e-3,
+                      control={"rtol": 1e-10, "atol": 1e-10})  # fmt: skip
+    loose = {"solver": "tsit5", "rtol": 1e-2, "atol": 1e-5}
+    fixed = {"initial_angle": -0.6}
+    result = fit(scene, data, ["length=0.82:0.1:5"], fixed=fixed, control=loose)
+    tol = tolerance_check(result, scene, fixed, loose)
+    assert tol["rtol_check"] == pytest.approx(1e-3)
+    # The pendulum's derivative converges fast: measured 3.7e-4 from rtol 1e-2 to 1e-3.
+    assert tol["derivatives_converged"] is True and 0 < tol["jacobian_change"] <= JACOBIAN_CHANGE
+    # One parameter: |1 − SE/SE_tight| = |‖J_tight‖/‖J‖ − 1| ≤ ‖J − J_tight‖/‖J‖.
+    se, se_tight = result.standard_errors["length"], tol["standard_errors_check"]["length"]
+    assert tol["standard_error_change"] == pytest.approx(abs(se / se_tight - 1), rel=1e-9)
+    assert tol["standard_error_change"] <= tol["jacobian_change"] * (1 + 1e-9) / (1 - 1e-2)
+    # The standard error at rtol 1e-3 from central differences of plain runs at 1e-3
+    # (re-adapted steps; h = 1e-4 L): measured 2e-5 relative to AD's.
+    comparison = Comparison(data, ResidualSpec())
+    estimate = result.estimates["length"]
+    tight = {"solver": "tsit5", "rtol": 1e-3, "atol": 1e-6}
+
+    def residuals(length):
+        params = scene.resolve_params({**fixed, "length": length})
+        channels, _ = run_channels(scene, params, comparison.ts, comparison.names, tight)
+        return comparison.residuals_np(channels)
+
+    h = 1e-4 * estimate
+    column = (residuals(estimate + h) - residuals(estimate - h)) / (2 * h)
+    assert se_tight == pytest.approx(1.0 / np.linalg.norm(column), rel=2e-4)
+    # A check whose Jacobian moved by more than the limit: flagged, and refitted.
+    unconverged = dict(tol, jacobian_change=0.05, standard_error_change=0.04,
+                       derivatives_converged=False)  # fmt: skip
+    stale = dataclasses.replace(result, tolerance=unconverged)
+    assert stale.derivatives_converged is False and stale.reproducible is True
+    assert any(f.startswith("DERIVATIVES NOT CONVERGED") for f in stale.flags())
+    assert stale.report()["derivatives_converged"] is False
+    refitted, control, records = refit_until_reproducible(
+        stale, scene, data, fixed=fixed, control=loose
+    )
+    assert [r["rtol"] for r in records] == pytest.approx([1e-3])
+    assert records[0]["derivatives_converged"] is True and refitted.derivatives_converged
+    assert control.rtol == pytest.approx(1e-3)

@@ -190,6 +190,10 @@ def test_optimize_command_refuses_bad_input_before_running(tmp_path, capsys):
         (["--scene-option", "friction_roughness=ploughing", "--set", "friction_coefficient=0.1"],
          "counts with --scene-option friction_roughness=constant"),
         (["--set", "friction_adhesion=0.02"], "--scene-option friction_roughness=ploughing"),
+        (["--derivative-change", "1e-3"], "--derivative-change is for --gradient pathwise"),
+        (["--gradient", "pathwise", "--derivative-change", "1e-3", "--no-step-tolerance-check"],
+         "exclude each other"),
+        (["--gradient", "pathwise", "--derivative-change", "2"], "--derivative-change = 2"),
     ]  # fmt: skip
     for extra, message in cases:
         assert main(["optimize", "--out", out, *extra]) == 2
@@ -312,7 +316,55 @@ def test_forward_mode_optimizes_a_loss_whose_runs_only_forward_mode_can_differen
         optimize(loss_with(None), {"length": 2.2}, bounds, steps=1, mode="sideways")
 
 
-@pytest.mark.slow  # ~2 min CPU: the ideal reference and one forward-mode deploy_array run to 0.6 s
+def test_pathwise_optimize_runs_at_the_tolerance_where_its_gradient_has_converged():
+    """`optimize(..., control=, derivative_change=)`: the gradient at the start is evaluated at
+    rtol, rtol/10, ... until it changes by at most the fraction (`fit.converged_tolerance`),
+    the optimisation runs at that tolerance, and every tolerance runs one compiled program.
+    Pendulum (no impacts) with adaptive Tsit5 steps from rtol 1e-2: a tolerance whose
+    gradient has not converged is refused even where the loss is smooth."""
+    import diffrax as dfx
+
+    from jaxdeploy.solvers import StepControl
+
+    scene = Pendulum()
+    base = scene.resolve_params({"initial_angle": -0.4})
+    tight = StepControl("tsit5", rtol=1e-10, atol=1e-13)
+    reference = run_scene(scene, {**base, "length": 1.3}, 0.6, n_save=31, control=tight).q[:, 2]
+
+    def loss(x, control):
+        q = run_scene(
+            scene, {**base, **x}, 0.6, n_save=31, control=control, adjoint=dfx.ForwardMode()
+        ).q[:, 2]
+        return jnp.mean((q - reference) ** 2)
+
+    said = []
+    result = optimize(
+        loss, {"length": 2.2}, {"length": (0.5, 3.0)}, steps=2, mode="forward",
+        control=StepControl("tsit5", rtol=1e-2, atol=1e-5), derivative_change=1e-5,
+        progress=said.append,
+    )  # fmt: skip
+    found = result.step_tolerance
+    assert result.status == "ok" and found.met is True
+    # Each check compared the gradient at rtol with that at rtol/10; the search stopped at
+    # the first within 1e-5, after at least one that was not (measured: 3.2e-5 from rtol 1e-2
+    # to 1e-3; the pendulum's gradient converges fast, hence the small fraction).
+    changes = [check["change"] for check in found.checks]
+    assert changes[-1] <= 1e-5 and all(c > 1e-5 for c in changes[:-1]) and len(changes) >= 2
+    assert found.rtol == pytest.approx(1e-2 * 10.0 ** -(len(changes) - 1))
+    assert any("derivatives changed by" in line for line in said)
+    # The optimisation's first gradient is the chosen tolerance's (dJ/du, reported in x).
+    # found.derivatives are dJ/du; result.gradient dJ/dx = (dJ/du)/(dx/du), and for the log
+    # map dx/du = x ln(hi/lo) s(1 − s), so at the chosen tolerance the two agree to round-off
+    # (at rtol 1e-2 they would differ by more than the search's 1e-5).
+    assert result.gradient[0]["length"] != 0
+    ratio = found.derivatives["length"] / result.gradient[0]["length"]
+    lo, hi = 0.5, 3.0
+    s = (math.log(2.2) - math.log(lo)) / (math.log(hi) - math.log(lo))
+    assert ratio == pytest.approx(2.2 * math.log(hi / lo) * s * (1 - s), rel=1e-9)
+    assert result.to_json()["step_tolerance"]["rtol"] == found.rtol
+
+
+@pytest.mark.slow  # ~2 min CPU: the ideal reference, one forward-mode deploy_array program to 0.6 s
 def test_pathwise_optimize_runs_on_an_event_objective(tmp_path):
     """`jaxdeploy optimize --gradient pathwise` on the lock time (an event output, located
     and differentiated by the implicit-function theorem): it crashed before (ForwardMode under
@@ -331,6 +383,10 @@ def test_pathwise_optimize_runs_on_an_event_objective(tmp_path):
     assert code == 0
     record = json.loads((out / "result.json").read_text())
     assert record["gradient"] == "pathwise" and record["status"] == "ok"
+    # The design ran at the tolerance where the start's gradient had converged (1e-3).
+    found = record["step_tolerance"]
+    assert found["met"] is True and found["checks"][-1]["change"] <= 1e-3
+    assert record["step_control"]["rtol"] == found["rtol"]
     first = record["history"][0]
     assert 0.5 < first["parts"]["panel1:lock_time"] < 0.6
     assert first["gradient"]["spring_stiffness"] < 0

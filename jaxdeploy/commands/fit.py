@@ -271,10 +271,16 @@ def _tolerance_line(tol) -> str:
     if "estimate_change_in_standard_errors" not in (tol or {}):
         return f"tolerance check at rtol {tol.get('rtol')}: {tol.get('note', 'not run')}"
     moves = ", ".join(f"{n} {v:+.2g}" for n, v in tol["estimate_change_in_standard_errors"].items())
+    jacobian = ""
+    if "jacobian_change" in tol:
+        jacobian = (
+            f"; the Jacobian changes by {tol['jacobian_change']:.2g} (limit "
+            f"{tol['jacobian_limit']:g}), the standard errors by {tol['standard_error_change']:.2g}"
+        )
     return (
         f"tolerance check (rtol {tol['rtol']:g} -> {tol['rtol_check']:g}): model moves "
         f"{tol['rms_model_change_over_sigma']:.2g} noise levels RMS; a refit would move "
-        f"the estimates by [{moves}] standard errors"
+        f"the estimates by [{moves}] standard errors{jacobian}"
     )
 
 
@@ -433,9 +439,10 @@ def _fit(args, job):
     )
     tolerance_check(result, job.scene, job.fixed, job.control)
     refits = []
-    if job.auto_tolerance and result.reproducible is False:
+    if job.auto_tolerance and False in (result.reproducible, result.derivatives_converged):
         # The default tolerance was chosen at the start point; at the estimate it is not
-        # tight enough: refit from the estimate at 10x tighter until the check passes.
+        # tight enough (for the model or for its Jacobian, which gives the standard errors):
+        # refit from the estimate at 10x tighter until the check passes.
         if not args.quiet:
             print(_tolerance_line(result.tolerance), file=sys.stderr)
         job.schedule["tolerance_check_before_refits"] = result.tolerance

@@ -14,6 +14,7 @@ from ._args import (
     add_step_control,
     check_used,
     integer_at_least,
+    number_in,
     parse_assignments,
     positive,
     refuse,
@@ -87,6 +88,20 @@ def add_arguments(parser) -> None:
         help="smoothed: Stein estimate on a Gaussian smoothing (robust to chatter); "
         "pathwise: AD through the solver (forward mode up to 6 parameters, reverse above); "
         "default smoothed",
+    )
+    parser.add_argument(
+        "--derivative-change",
+        type=number_in("--derivative-change", 0.0, 1.0, high_open=True),
+        default=None,
+        help="--gradient pathwise: the step tolerance is tightened (by 10 at a time, from --rtol "
+        "or the scene's) until the gradient at the start changes by at most this fraction at "
+        "a 10x tighter one, in (0, 1) (default 1e-3, as gradcheck)",
+    )
+    parser.add_argument(
+        "--no-step-tolerance-check",
+        action="store_true",
+        help="--gradient pathwise: run at --rtol (or the scene's) as given, without checking "
+        "that the gradient has converged there",
     )
     # deploy_array's objectives are rough below about half a unit of ln Ra (contact events
     # shift with the design): smoothing at s = 0.1 follows that roughness, at 0.5 the trend
@@ -220,6 +235,7 @@ def run(args) -> int:
         x0, notes = _start(scene, bounds, defaults, start)
         for name, value in x0.items():  # the start must be a valid scene parameter too
             scene.resolve_params({**fixed, name: value})
+        _check_tolerance_flags(args)
         control = step_control(args, scene)
         _plan_run(args, scene, scene.resolve_params({**fixed, **x0}), control)
         out = args.out or default_output_dir("optimize", scene.name)
@@ -321,7 +337,13 @@ def _optimize(args, scene, objective, bounds, fixed, x0, control, folder, began)
         smoothing=smoothing,
         callback=progress,
         mode=mode,
+        **_tolerance_search(args, problem, pathwise),
     )
+    if result.step_tolerance is not None and not args.quiet:
+        print(result.step_tolerance.summary(), file=sys.stderr)
+    design_control = problem.step_control
+    if result.step_tolerance is not None:
+        design_control = result.step_tolerance.control
     record = {
         "scene": args.scene,
         "scene_options": scene.options,
@@ -345,7 +367,7 @@ def _optimize(args, scene, objective, bounds, fixed, x0, control, folder, began)
             "nominal": dict(smoothing.nominal),
         },
         "params": problem.fixed,
-        "step_control": problem.step_control.to_json(),
+        "step_control": design_control.to_json(),
         "ideal_lock_time_s": problem.lock_time,
         "wall_time_s": time.perf_counter() - began,
         **result.to_json(),
@@ -368,6 +390,35 @@ def _optimize(args, scene, objective, bounds, fixed, x0, control, folder, began)
     if not args.quiet:
         print(f"wrote {out}/result.json, {out}/{figure} (objective history)")
     return 0 if result.status == "ok" else 1
+
+
+def _check_tolerance_flags(args) -> None:
+    """--derivative-change and --no-step-tolerance-check: pathwise gradients only, not both."""
+    given = [flag for flag, value in (("--derivative-change", args.derivative_change is not None),
+             ("--no-step-tolerance-check", args.no_step_tolerance_check)) if value]  # fmt: skip
+    if len(given) == 2:
+        raise ValueError("--derivative-change and --no-step-tolerance-check exclude each other")
+    if given and (args.gradient != "pathwise" or args.robust):
+        raise ValueError(f"{given[0]} is for --gradient pathwise (without --robust)")
+
+
+def _tolerance_search(args, problem, pathwise) -> dict:
+    """`optimize`'s step-control keywords: a pathwise gradient runs at the tolerance at which
+    it is converged at the start (`fit.converged_tolerance`, as `jaxdeploy gradcheck`), the
+    control's tolerances data of the one compiled gradient program."""
+    from ..fit import DERIVATIVE_CHANGE
+
+    if not pathwise:
+        return {}
+    fraction = None if args.no_step_tolerance_check else args.derivative_change
+    if fraction is None and not args.no_step_tolerance_check:
+        fraction = DERIVATIVE_CHANGE
+
+    def say(message):
+        if not args.quiet:
+            print(f"step tolerance: {message}", file=sys.stderr, flush=True)
+
+    return {"control": problem.step_control, "derivative_change": fraction, "progress": say}
 
 
 def _plot(result, scene, out):

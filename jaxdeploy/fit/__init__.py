@@ -21,6 +21,7 @@ from ._derivative_tolerance import (
 from ._derivatives import (
     FORWARD_MODE_MAX_PARAMETERS,
     central_differences,
+    gradient_at_tolerances,
     gradient_function,
     gradient_mode,
     output_function,
@@ -28,6 +29,7 @@ from ._derivatives import (
     parameter_jacobian,
 )
 from ._fit import (
+    JACOBIAN_CHANGE,
     RTOL_CHECK_FLOOR,
     FitResult,
     fit,
@@ -47,7 +49,9 @@ __all__ = [
     "DerivativeTolerance",
     "converged_tolerance",
     "derivative_tolerance",
+    "gradient_at_tolerances",
     "FORWARD_MODE_MAX_PARAMETERS",
+    "JACOBIAN_CHANGE",
     "RTOL_CHECK_FLOOR",
     "RTOL_FLOOR",
     "Comparison",

@@ -155,13 +155,15 @@ def derivative_tolerance(
     updated by a mapping, or a `StepControl`), and the output's value at the chosen
     tolerance. `options` go to `parameter_gradient` (`ts`, `n_save`, ...)."""
     from ..batch import step_control
-    from ._derivatives import parameter_gradient
+    from ._derivatives import gradient_at_tolerances
 
     values = {}
+    # One compiled derivative program for every tolerance of the search (rtol and atol are
+    # its data), not one per tolerance.
+    gradient = gradient_at_tolerances(scene, params, wrt, output, t_end, mode=mode, **options)
 
     def evaluate(c):
-        value, grad = parameter_gradient(scene, params, wrt, output, t_end, mode=mode,
-                                         control=c, **options)  # fmt: skip
+        value, grad = gradient(c)
         values[c.rtol] = float(value)
         return {k: float(v) for k, v in grad.items()}
 

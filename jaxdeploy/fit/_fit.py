@@ -61,6 +61,14 @@ REPRODUCIBLE = 1.0
 # `refit_until_reproducible`: the tightest rtol a tolerance check runs at (so the tightest
 # refit is at 10x this). Below ~1e-12 a float64 run's error estimate approaches round-off.
 RTOL_CHECK_FLOOR = 1e-12
+# `tolerance_check`: the Jacobian ∂r/∂θ at the estimate counts as converged when no parameter's
+# column changes by more than this fraction (relative, 2-norm) at a 10x tighter tolerance (the
+# rule of `derivative_tolerance`). Why 1e-2 for a fit: a relative error ε of the Jacobian
+# changes each standard error by ≲ ε and moves the Gauss–Newton optimum, whose condition is
+# Jᵀr = 0, by δθ = (JᵀJ)⁻¹ΔJᵀr ≈ ε standard errors for white residuals in noise units; 1 %
+# keeps both below the standard error's own sampling uncertainty, 1/√(2(N − p)) = 1 % at
+# N = 5000 residuals.
+JACOBIAN_CHANGE = 1e-2
 
 
 @dataclass
@@ -99,6 +107,16 @@ class FitResult:
     jacobian: np.ndarray | None = None
     # `tolerance_check`'s record (None until it ran).
     tolerance: dict | None = None
+    # The compiled model and the internal point of the estimate (what `tolerance_check`
+    # evaluates the Jacobian at a tighter tolerance with); not part of the report.
+    model: object = field(default=None, repr=False)
+    z: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def derivatives_converged(self) -> bool | None:
+        """Whether ∂r/∂θ at the estimate changes by at most `JACOBIAN_CHANGE` (relative, per
+        parameter) at a 10x tighter tolerance (`tolerance_check`); None when not checked."""
+        return (self.tolerance or {}).get("derivatives_converged")
 
     @property
     def adequate(self) -> bool:
@@ -182,6 +200,15 @@ class FitResult:
                 f"standard errors (limit {REPRODUCIBLE:g}): the fit matched the integration "
                 "error; give a tighter --rtol or fit a shorter record"
             )
+        if self.derivatives_converged is False:
+            tol = self.tolerance
+            out.append(
+                "DERIVATIVES NOT CONVERGED: at rtol "
+                f"{tol['rtol_check']:g} instead of {tol['rtol']:g} the Jacobian at the estimate "
+                f"changes by {tol['jacobian_change']:.3g} (limit {JACOBIAN_CHANGE:g}), the "
+                f"standard errors by up to {tol['standard_error_change']:.3g}: give a tighter "
+                "--rtol"
+            )
         out += [f"{n} is at its bound (the data push it beyond)" for n in self.at_bound]
         out += [
             f"{n} is not identified (std. error > {NOT_IDENTIFIED:.0%} of the value)"
@@ -206,6 +233,7 @@ class FitResult:
             "converged": self.converged,
             "adequate": self.adequate,
             "reproducible": self.reproducible,
+            "derivatives_converged": self.derivatives_converged,
             "estimates": self.estimates,
             "standard_errors": self.standard_errors,
             "standard_errors_inflated": self.standard_errors_inflated,
@@ -255,18 +283,20 @@ class Model:
         import jax
 
         from ..batch import run_scene, step_control
+        from ..solvers import tolerances_as_data
         from ._derivatives import _adaptive
 
         names = list(names)
         ts = np.asarray(ts, dtype=float)
-        if _adaptive(step_control(scene, control)):
+        self.control = step_control(scene, control)
+        if _adaptive(self.control):
             # Adaptive steps: differentiate the run over its own accepted steps (see
             # `simulate(..., replay_steps=True)`), not a loop that re-decides them.
             simulate_options = {"replay_steps": True, **simulate_options}
 
         self.ts = ts
 
-        def evaluate(z, ts_run):
+        def evaluate(z, ts_run, control):
             params = dict(fixed)
             for k, p in enumerate(parameters):
                 params[p.name] = p.to_physical(z[k])
@@ -283,8 +313,14 @@ class Model:
             ok = traj.result == dfx.RESULTS.successful
             return model, (model, ok)
 
-        self._jac = jax.jit(jax.jacfwd(evaluate, has_aux=True))
-        self._batch = jax.jit(jax.vmap(lambda z, t: evaluate(z, t)[1], in_axes=(0, None)))
+        # The step control's tolerances are data of the compiled programs: the tolerance
+        # check's Jacobian at a 10x tighter rtol (`tolerance_check`) compiles nothing more.
+        self._jac = tolerances_as_data(
+            lambda c, z, t: jax.jacfwd(lambda w: evaluate(w, t, c), has_aux=True)(z)
+        )
+        self._batch = tolerances_as_data(
+            lambda c, zs, t: jax.vmap(lambda z: evaluate(z, t, c)[1])(zs)
+        )
 
     def save_times(self, n: int | None = None) -> np.ndarray:
         """The first `n` save times, padded with the last of them to the compiled length."""
@@ -296,13 +332,16 @@ class Model:
     def channels_batch(self, zs, n: int | None = None):
         """Channels of many points `zs` (k, p) as one vmapped batch: `({name: (k, N)}, ok)`
         (only the first `n` samples are the save times; see `save_times`)."""
-        model, ok = self._batch(np.asarray(zs, dtype=float), self.save_times(n))
+        zs, ts = np.asarray(zs, dtype=float), self.save_times(n)
+        model, ok = self._batch(self.control, zs, ts)
         return {n: np.asarray(v) for n, v in model.items()}, np.asarray(ok)
 
-    def __call__(self, z, n: int | None = None):
+    def __call__(self, z, n: int | None = None, control=None):
         """`(channels, d channels/dz, ok)` at `z` up to the `n`-th save time: `{name: (N,)}`,
-        `{name: (N, p)}`, of which the first `n` samples are the save times."""
-        jac, (model, ok) = self._jac(np.asarray(z, dtype=float), self.save_times(n))
+        `{name: (N, p)}`, of which the first `n` samples are the save times. `control`: a
+        `StepControl` differing from the model's in its tolerances (default the model's)."""
+        control = self.control if control is None else control
+        jac, (model, ok) = self._jac(control, np.asarray(z, dtype=float), self.save_times(n))
         model = {n: np.asarray(v) for n, v in model.items()}
         jac = {n: np.asarray(v) for n, v in jac.items()}
         ok = bool(ok) and all(np.all(np.isfinite(v)) for v in (*model.values(), *jac.values()))
@@ -334,9 +373,9 @@ class StageModel:
             ]
         )
 
-    def __call__(self, z):
+    def __call__(self, z, control=None):
         n = self.comparison.n_save
-        channels, jac, ok = self.model(z, n)
+        channels, jac, ok = self.model(z, n, control)
         channels = {name: v[:n] for name, v in channels.items()}
         r = self.comparison.residuals_np(channels)
         jr = self.comparison.residual_jacobian(jac)
@@ -664,6 +703,8 @@ def fit(
         model_final=aux,
         stages=stages,
         adequacy=adequacy,
+        model=compiled,
+        z=np.asarray(z, dtype=float),
         **details,
     )
 
@@ -690,8 +731,15 @@ def tolerance_check(result: FitResult, scene, fixed: Mapping, control) -> dict:
         result.tolerance = record
         return record
     tight = _scaled(control, 0.1)
-    y_tight, _ = run_channels(scene, params, cmp_.ts, cmp_.names, tight)
     record.update(rtol_check=tight.rtol, atol_check=tight.atol)
+    jac_tight = None
+    if result.model is not None and result.z is not None:
+        # One forward-mode evaluation of the fit's compiled model (its tolerance is data):
+        # the channels and their Jacobian at the tighter tolerance.
+        r_tight, jac_tight, y_tight, ok = StageModel(result.model, cmp_)(result.z, tight)
+        y_tight = y_tight if ok else None
+    else:
+        y_tight, _ = run_channels(scene, params, cmp_.ts, cmp_.names, tight)
     if y_tight is None:
         record["note"] = "the run at the tighter tolerance failed"
         result.tolerance = record
@@ -714,8 +762,37 @@ def tolerance_check(result: FitResult, scene, fixed: Mapping, control) -> dict:
             n: float(d / e) for n, d, e in zip(result.names, delta, se, strict=True)
         },
     )
+    if jac_tight is not None:
+        record.update(_derivative_check(result, r_tight, jac_tight))
     result.tolerance = record
     return record
+
+
+def _derivative_check(result: FitResult, r_tight, jac_tight) -> dict:
+    """The Jacobian's convergence at the estimate: the largest relative change of a parameter's
+    column of ∂r/∂θ (2-norm; parameters at a bound left out) and of a standard error between
+    the fit's tolerance and the 10x tighter one (`JACOBIAN_CHANGE`)."""
+    _, se_tight, *_, details = _curvature(
+        result.parameters, result.z, r_tight, jac_tight, result.noise_known
+    )
+    before, after = result.jacobian, details["jacobian"]
+    changes, se_changes = {}, {}
+    for k, name in enumerate(result.names):
+        norm = float(np.linalg.norm(after[:, k]))
+        if name in result.at_bound or not norm > 0:
+            continue
+        changes[name] = float(np.linalg.norm(after[:, k] - before[:, k])) / norm
+        if math.isfinite(se_tight[k]) and se_tight[k] > 0:
+            se_changes[name] = abs(result.standard_errors[name] / se_tight[k] - 1.0)
+    change = max(changes.values(), default=0.0)
+    return {
+        "jacobian_change": change,
+        "jacobian_change_by_parameter": changes,
+        "standard_error_change": max(se_changes.values(), default=0.0),
+        "standard_errors_check": {n: float(e) for n, e in zip(result.names, se_tight, strict=True)},
+        "jacobian_limit": JACOBIAN_CHANGE,
+        "derivatives_converged": bool(change <= JACOBIAN_CHANGE),
+    }
 
 
 def refit_until_reproducible(
@@ -732,7 +809,8 @@ def refit_until_reproducible(
     on_stage: Callable | None = None,
     **simulate_options,
 ) -> tuple[FitResult, object, list[dict]]:
-    """While `result` is not reproducible at the noise level (`tolerance_check`), refit at a 10x
+    """While `result` is not reproducible at the noise level or its Jacobian has not converged
+    (`tolerance_check`: `reproducible`, `derivatives_converged`), refit at a 10x
     tighter rtol and atol, from its estimate, with its last residual stage (`residuals`), and
     check again; stop when a check passes, cannot run, or would need a run below `floor`.
 
@@ -758,7 +836,7 @@ def refit_until_reproducible(
     spec = residuals if residuals is not None else result.comparison.spec
     records = []
     while (
-        result.reproducible is False
+        False in (result.reproducible, result.derivatives_converged)
         and control.rtol is not None
         and control.rtol * 0.01 >= floor * (1 - 1e-9)
     ):
@@ -787,6 +865,7 @@ def refit_until_reproducible(
             converged=refit.converged,
             adequate=refit.adequate,
             reproducible=refit.reproducible,
+            derivatives_converged=refit.derivatives_converged,
             tolerance=refit.tolerance,
             iterations=refit.iterations,
             evaluations=refit.evaluations,

@@ -24,7 +24,13 @@ from .index1 import (
 )
 from .non_finite import stop_at_non_finite
 from .registry import AUTO_TIGHT_RTOL, SOLVER_NAMES, resolve_solver, solver_by_name
-from .step_control import SolverChoiceWarning, StepControl, default_control, solver_advice
+from .step_control import (
+    SolverChoiceWarning,
+    StepControl,
+    default_control,
+    solver_advice,
+    tolerances_as_data,
+)
 from .term import MechanismState, MechanismTerm
 
 __all__ = [
@@ -50,6 +56,7 @@ __all__ = [
     "stabilised_accelerations",
     "state_norm",
     "step_maximum",
+    "tolerances_as_data",
     "stop_at_non_finite",
     "TrackExtremes",
     "TrackedState",

@@ -16,7 +16,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import diffrax as dfx
@@ -263,6 +263,47 @@ class StepControl:
 FIELDS = tuple(f.name for f in dataclasses.fields(StepControl))
 
 
+def tolerances_as_data(function: Callable) -> Callable:
+    """`call(control, *args) = function(control, *args)`, jit-compiled with `control`'s rtol
+    and atol passed as data (traced scalars; `StepControl` checks values only when they are
+    concrete, and the controller takes them as arrays): controls that differ only in their
+    tolerances share one compiled program. A program is compiled per solver (an automatic
+    choice is resolved by each control's concrete rtol first, so `"auto"` crossing
+    `AUTO_TIGHT_RTOL` compiles once more) and per other step setting; a fixed-step control
+    is closed over as it is. Why: a program traced with a control's tolerances holds them
+    as constants, and a search over tolerances (a derivative's convergence,
+    `fit.derivative_tolerance`; a design's gradient, `optimize`) would compile one
+    program per tolerance, each the cost of the whole program (minutes for a deploy_array
+    derivative). `call.programs` holds the compiled programs by setting."""
+    import jax
+
+    programs = {}
+
+    def call(control: StepControl, *args):
+        if not control.adaptive:
+            key = (control, None, None)
+            if key not in programs:
+                programs[key] = jax.jit(lambda *a: function(control, *a))
+            return programs[key](*args)
+        structure = control.replace(solver=control.resolved_solver())
+        has_rtol, has_atol = control.rtol is not None, control.atol is not None
+        key = (structure.replace(rtol=0.5, atol=1.0), has_rtol, has_atol)
+        if key not in programs:
+
+            def run(rtol, atol, *a, structure=structure, has_rtol=has_rtol, has_atol=has_atol):
+                traced = structure.replace(rtol=rtol if has_rtol else None,
+                                           atol=atol if has_atol else None)  # fmt: skip
+                return function(traced, *a)
+
+            programs[key] = jax.jit(run)
+        rtol = float(control.rtol) if has_rtol else 0.0
+        atol = float(control.atol) if has_atol else 0.0
+        return programs[key](rtol, atol, *args)
+
+    call.programs = programs
+    return call
+
+
 def as_step_control(control, base: StepControl | None = None) -> StepControl:
     """`control` as a `StepControl`: a `StepControl` as it is; a mapping of field names (or
     None) as overrides of `base` (a scene's default; required for a mapping)."""
@@ -372,6 +413,8 @@ def scene_default_choice(control: StepControl, scene_default: StepControl):
     generalized-α against Johnson's closed forms, docs/verification.md), so only a step control
     the user changed is judged."""
     with warnings.catch_warnings():
-        if control == scene_default:
+        # Traced tolerances (a derivative program taking them as data) cannot be compared;
+        # `solver_advice` judges no traced rtol either.
+        if is_concrete((control.rtol, control.atol)) and control == scene_default:
             warnings.simplefilter("ignore", SolverChoiceWarning)
         yield
