@@ -25,9 +25,10 @@ test: $(BIN)/activate
 	$(BIN)/ruff format --check .
 	$(BIN)/pytest $(PYTEST_WORKERS)
 
-# Every test, the slow independent checks included (-m overrides the addopts). Not yet what CI
-# runs: on 2 loaded cores it took over 80 min, the deploy_array fit-recovery test alone over
-# 45 min (each forward-mode Jacobian of the fit ~1-2 min); see the notes of issue 34.
+# Every test, the slow independent checks included (-m overrides the addopts), longest first
+# (tests/durations.json). Not yet what CI runs: on a fresh clone of c4635d8 the slow set alone
+# took 92 min on 2 shared cores (load 12-19), the deploy_array fit-recovery test 49 min of it,
+# with 3 failures (see the notes of issue 34).
 test-all: $(BIN)/activate
 	$(BIN)/pytest $(PYTEST_WORKERS) -m "slow or not slow"
 
