@@ -150,6 +150,34 @@ def add_step_control(parser, unset: str | None = None, default: str = "the scene
     )
 
 
+def add_derivative_tolerance_check(parser, when: str, what: str, default: str) -> None:
+    """`--derivative-change` and `--no-step-tolerance-check`, for the commands that
+    differentiate runs (`gradcheck`, `optimize --gradient pathwise`): the step tolerance is
+    tightened from `--rtol` (or the scene's) until `what` (e.g. "the AD derivatives") changes
+    by at most a fraction at a 10x tighter one (`solvers.tolerances_as_data`). `when`: the
+    condition under which the flags apply, prefixed to their help ("" for always);
+    `default`: `--derivative-change`'s default, as its help says it."""
+    group = parser.add_argument_group(
+        "derivative tolerance check",
+        f"{when}derivatives need a tighter step tolerance than values; the tolerance is "
+        "checked before the derivatives are used.",
+    )
+    group.add_argument(
+        "--derivative-change",
+        type=number_in("--derivative-change", 0.0, 1.0, high_open=True),
+        default=None,
+        help=f"{when}the step tolerance is tightened (by 10 at a time, from --rtol or the "
+        f"scene's) until {what} changes by at most this fraction at a 10x tighter one, in "
+        f"(0, 1) (default: {default})",
+    )
+    group.add_argument(
+        "--no-step-tolerance-check",
+        action="store_true",
+        help=f"{when}run at --rtol (or the scene's) as given, without checking that {what} "
+        "has converged there",
+    )
+
+
 def step_control(args, scene):
     """The `StepControl` of a run of `scene` from the shared flags: the scene's default with
     the flags given applied. `--dt` without `--rtol`/`--atol` makes the steps fixed. A

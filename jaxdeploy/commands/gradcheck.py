@@ -15,6 +15,7 @@ import sys
 from ._args import (
     SCENE_OPTION_HELP,
     SET_HELP,
+    add_derivative_tolerance_check,
     add_step_control,
     integer_at_least,
     number_in,
@@ -64,20 +65,7 @@ def add_arguments(parser) -> None:
         default=1e-2,
         help="relative agreement of AD with the converged differences, in (0, 1) (default 0.01)",
     )
-    parser.add_argument(
-        "--derivative-change",
-        type=number_in("--derivative-change", 0.0, 1.0, high_open=True),
-        default=None,
-        help="the step tolerance is tightened (by 10 at a time, from --rtol or the scene's) until "
-        "the AD derivatives change by at most this fraction at a 10x tighter one, in (0, 1) "
-        "(default: --tolerance / 10)",
-    )
-    parser.add_argument(
-        "--no-step-tolerance-check",
-        action="store_true",
-        help="run at --rtol (or the scene's) as given, without checking that the derivatives "
-        "have converged there",
-    )
+    add_derivative_tolerance_check(parser, "", "the AD derivatives", "--tolerance / 10")
     parser.add_argument(
         "--modes",
         nargs="+",

@@ -11,10 +11,10 @@ from ._args import (
     OBJECTIVE_PRESETS,
     SCENE_OPTION_HELP,
     SET_HELP,
+    add_derivative_tolerance_check,
     add_step_control,
     check_used,
     integer_at_least,
-    number_in,
     parse_assignments,
     positive,
     refuse,
@@ -89,19 +89,8 @@ def add_arguments(parser) -> None:
         "pathwise: AD through the solver (forward mode up to 6 parameters, reverse above); "
         "default smoothed",
     )
-    parser.add_argument(
-        "--derivative-change",
-        type=number_in("--derivative-change", 0.0, 1.0, high_open=True),
-        default=None,
-        help="--gradient pathwise: the step tolerance is tightened (by 10 at a time, from --rtol "
-        "or the scene's) until the gradient at the start changes by at most this fraction at "
-        "a 10x tighter one, in (0, 1) (default 1e-3, as gradcheck)",
-    )
-    parser.add_argument(
-        "--no-step-tolerance-check",
-        action="store_true",
-        help="--gradient pathwise: run at --rtol (or the scene's) as given, without checking "
-        "that the gradient has converged there",
+    add_derivative_tolerance_check(
+        parser, "--gradient pathwise: ", "the gradient at the start", "1e-3, as gradcheck"
     )
     # deploy_array's objectives are rough below about half a unit of ln Ra (contact events
     # shift with the design): smoothing at s = 0.1 follows that roughness, at 0.5 the trend
