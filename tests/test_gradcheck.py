@@ -52,6 +52,24 @@ def test_the_json_record_says_what_the_issue_asks_and_is_strict():
     assert record["params"]["k"]["fd"] == {"1e-03": 1.0, "1e-04": 1.0}
 
 
+def test_a_step_whose_perturbed_runs_failed_is_reported_and_left_out():
+    from jaxdeploy.io import strict_json
+
+    replay = {"1e-02": math.nan, "1e-03": 1.001, "1e-04": 1.0, "1e-05": 1.0002}
+    p = _check(1.0, replay)
+    p.failed = {"replay": {"1e-02": "failed after t = 0.54 s: non-finite"}}
+    assert p.converged == pytest.approx(1.0001) and p.agree
+    assert p.agreeing_steps("replay") == ["1e-03", "1e-04", "1e-05"]
+    check = GradientCheck("s", "lock_time", 0.5, {"k": p}, (1e-2, 1e-3, 1e-4, 1e-5), 1e-2)
+    record = json.loads(strict_json(check.to_json()))  # strict: the NaN is null
+    assert record["params"]["k"]["fd"]["1e-02"] is None
+    assert record["params"]["k"]["failed_runs"] == p.failed
+    assert "replay runs failed at 1e-02" in check.table()
+    # Only failed steps: no converged difference, never "agree".
+    none = _check(1.0, {"1e-02": math.nan, "1e-03": math.nan})
+    assert math.isnan(none.converged) and not none.agree
+
+
 @pytest.mark.slow  # forward mode at 2+ tolerances and 2 x 2 difference batches of slider_crank
 def test_gradcheck_command_on_the_first_onset(tmp_path, capsys):
     from jaxdeploy.cli import main

@@ -226,6 +226,7 @@ def central_differences(
     control: Mapping | None = None,
     replay: bool = True,
     abs_step=None,
+    failed: dict | None = None,
     **simulate_options,
 ) -> dict:
     """`{name: (f(θ + h e_k) − f(θ − h e_k)) / 2h}`, `h = rel_step·|θ_k|` (`rel_step` one
@@ -244,7 +245,12 @@ def central_differences(
     difference then approximates the derivative of the same discrete map as
     `parameter_jacobian`, with a truncation error O(h²) instead of the O(tol/h) noise of
     re-adapted steps. `replay=False` differences re-adapted runs (what a user perturbing
-    the model sees)."""
+    the model sees).
+
+    A perturbed run that fails (e.g. a large step that makes an explicit method unstable
+    over the replayed steps) raises a `RuntimeError` naming it; with a dict `failed` it is
+    recorded there instead, `{name: status of its first failed run}`, and that parameter's
+    difference is NaN (the others are unaffected: one batch, judged per case)."""
     import numpy as np
 
     from ..batch import simulate_batch, step_control
@@ -263,9 +269,10 @@ def central_differences(
     batch = simulate_batch(
         scene, cases, t_end, ts=ts, n_save=n_save, control=control, **simulate_options
     )
-    if not all(batch.ok):
-        failed = [s for s in batch.statuses() if s != "ok"]
-        raise RuntimeError(f"a perturbed run failed: {failed[0]}")
+    ok = batch.ok
+    if failed is None and not all(ok):
+        statuses = [s for s in batch.statuses() if s != "ok"]
+        raise RuntimeError(f"a perturbed run failed: {statuses[0]}")
     values = [
         np.asarray(output(scene.outputs(batch.mechanism(i), batch.case(i))))
         for i in range(batch.size)
@@ -273,8 +280,12 @@ def central_differences(
     out, i = {}, 0
     for name in wrt:
         weights = [w for _, w in stencils[name]]
-        out[name] = sum(w * v for w, v in zip(weights, values[i : i + len(weights)], strict=True))
+        cases = range(i, i + len(weights))
+        out[name] = sum(w * values[c] for w, c in zip(weights, cases, strict=True))
         out[name] = out[name] / widths[name]
+        if not all(ok[c] for c in cases):
+            failed[name] = next(batch.case(c).status() for c in cases if not ok[c])
+            out[name] = np.full_like(np.asarray(out[name], dtype=float), np.nan)
         i += len(weights)
     return out
 

@@ -16,7 +16,10 @@ moves an event later puts it in the next step, where the model switches (the lat
 taken) in another place — a jump of the replayed map that grows relative to h as h shrinks,
 not a derivative (deploy_array's lock time: replayed differences drifted from 0.7 % to 29 %
 off AD between h = 1e-4 and 1e-6 while no impact count changed). Separations are not counted
-(their located times carry no derivative and are not outputs).
+(their located times carry no derivative and are not outputs). A perturbed run that fails
+(a large step can make an explicit method unstable over the unperturbed run's steps once the
+latch engages elsewhere) gives no difference at that step: it is reported (`failed_runs` in
+`to_json`, crosses in the plot) and left out, and the sweep goes on.
 
 Verdict. The converged difference is the mean of the pair of consecutive unflagged steps of
 one kind that agree best, over both kinds (their relative spread and their kind are
@@ -99,6 +102,8 @@ class ParameterCheck:
     ad_reverse: float | None
     fd: dict = field(default_factory=dict)  # {kind: {step label: difference}}
     switched: dict = field(default_factory=dict)  # {kind: [step labels]}
+    # {kind: {step label: status}}: steps whose perturbed runs failed (difference NaN)
+    failed: dict = field(default_factory=dict)
     absolute_steps: dict = field(default_factory=dict)  # {step label: h in the unit}
     converged: float = math.nan
     spread: float = math.nan
@@ -121,7 +126,9 @@ class ParameterCheck:
         return [
             h
             for h, v in self.fd.get(kind, {}).items()
-            if h not in self.switched.get(kind, []) and abs(v - self.ad) <= self.tolerance * scale
+            if h not in self.switched.get(kind, [])
+            and math.isfinite(v)
+            and abs(v - self.ad) <= self.tolerance * scale
         ]
 
     def to_json(self) -> dict:
@@ -132,6 +139,7 @@ class ParameterCheck:
             "fd": self.fd["replay"],
             "fd_rerun": self.fd.get("rerun", {}),
             "switched": self.switched,
+            "failed_runs": self.failed,
             "absolute_steps": self.absolute_steps,
             "converged_fd": self.converged,
             "converged_spread": self.spread,
@@ -186,6 +194,8 @@ class GradientCheck:
             for kind in p.fd:
                 steps = p.agreeing_steps(kind)
                 spans.append(f"{kind} " + (f"{steps[0]}…{steps[-1]}" if steps else "none"))
+            for kind, steps in p.failed.items():
+                spans.append(f"{kind} runs failed at {', '.join(steps)}")
             lines.append(
                 f"  {name}: AD {p.ad:.8g}{reverse}  FD {p.converged:.8g} ({p.converged_kind}, "
                 f"spread {p.spread:.1e})  rel. error {p.relative_error:.1e}  agreeing steps "
@@ -197,7 +207,8 @@ class GradientCheck:
 
     def plot(self, path: str) -> None:
         """|FD − AD|/|AD| against the relative step, per parameter, replayed and rerun;
-        flagged steps (an impact count changed) as open markers."""
+        flagged steps (an impact count changed) as open markers, steps whose perturbed runs
+        failed as crosses at the top."""
         import matplotlib
 
         matplotlib.use("Agg")
@@ -215,6 +226,10 @@ class GradientCheck:
                 hs = [float(h) for h in p.fd[kind]]
                 err = [max(abs(v - p.ad) / scale, 1e-17) for v in p.fd[kind].values()]
                 ax.loglog(hs, err, style, color=color, label=f"{name} ({kind})")
+                failed = [hs[i] for i, h in enumerate(p.fd[kind]) if h in p.failed.get(kind, {})]
+                if failed:  # no difference: marked at the top of the axes
+                    ax.plot(failed, [1.0] * len(failed), "x", color=color,
+                            transform=ax.get_xaxis_transform())  # fmt: skip
                 flagged = [i for i, h in enumerate(p.fd[kind]) if h in p.switched.get(kind, [])]
                 ax.loglog(
                     [hs[i] for i in flagged],
@@ -357,14 +372,18 @@ def gradient_check(
             flags = with_counts
             if kind == "replay" and replayed:
                 flags = partial(with_counts, step_times=replayed["replay_steps"])
+            failed = {}
             d = central_differences(
                 scene, base, wrt, flags, t_end, h, replay=False, abs_step=abs_step,
-                **options, **extra,
+                failed=failed, **options, **extra,
             )  # fmt: skip
+            for k, status in failed.items():
+                say(f"  {k}: a perturbed run failed ({status}); no difference at step {label}")
+                checks[k].failed.setdefault(kind, {})[label] = status
             for k in wrt:
                 row = np.asarray(d[k])
                 checks[k].fd.setdefault(kind, {})[label] = float(row[0])
-                if np.any(row[1:] != 0):
+                if k not in failed and np.any(row[1:] != 0):
                     checks[k].switched.setdefault(kind, []).append(label)
     for check in checks.values():
         check.converged, check.spread, check.converged_kind = _converged(check)
