@@ -116,7 +116,7 @@ def test_scalar_loss_gradient_is_the_jacobian_contracted():
         return ch["journal_x"]
 
     f, x0 = output_function(scene, base, ["restitution"], output, 2e-4, ts=ts, control=control)
-    grad = jax.grad(lambda x: jnp.dot(weights, f(x)))(x0)["restitution"]
+    grad = jax.jit(jax.grad(lambda x: jnp.dot(weights, f(x))))(x0)["restitution"]
     jac = parameter_jacobian(
         scene, base, ["restitution"], output, 2e-4, mode="forward", ts=ts, control=control
     )["restitution"]
