@@ -8,9 +8,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _derivative_helpers import jacobian_and_differences
 
 from jaxdeploy import contact
-from jaxdeploy.fit import central_differences, parameter_jacobian
 from jaxdeploy.mechanism import (
     Body,
     Mechanism,
@@ -240,11 +240,13 @@ def test_impact_at_clearance_equal_to_sigma_balances_energy(damping):
     assert float(np.min(np.asarray(traj.v[:, 0]))) < 0.0  # rebounds
 
 
-@pytest.mark.slow  # 68 s of the default suite at 844cb65 (2 cores): kept out of it
+@pytest.mark.slow
 def test_run_derivatives_from_the_centre_match_central_differences():
     """c = σ = 1 µm, slow launch (1 cm/s) from e = 0: the journal sits in two-sided contact,
-    then meets the near wall. Forward and reverse mode of the replayed adaptive run agree and
-    match central differences over the same steps, w.r.t. c, σ, c_e and K."""
+    then meets the near wall. Reverse mode of the replayed adaptive run is finite from e = 0
+    and matches central differences over the same steps (their runs from the same compiled
+    program), w.r.t. c, σ, c_e and K. (Forward and reverse mode of a replayed impact run agree
+    to round-off: tests/test_gradients.py; forward mode from this start is finite: below.)"""
     scene, params = _impact("flores", impact_speed=0.01)
     wrt = ["clearance", "sigma", "restitution", "stiffness"]
     t_end = 3e-4
@@ -253,13 +255,12 @@ def test_run_derivatives_from_the_centre_match_central_differences():
     def output(ch):
         return jnp.concatenate([1e3 * ch["journal_x"][1:], 1e-6 * ch["journal_ax"][1:]])
 
-    rev = parameter_jacobian(scene, params, wrt, output, t_end, ts=ts)
-    fwd = parameter_jacobian(scene, params, wrt, output, t_end, mode="forward", ts=ts)
-    fd = central_differences(scene, params, wrt, output, t_end, 1e-5, ts=ts)
+    rev, fd = jacobian_and_differences(
+        scene, params, wrt, output, t_end, 1e-5, ts=ts, mode="reverse"
+    )
     for name in wrt:
         scale = np.abs(fd[name]).max()
         assert scale > 0 and np.all(np.isfinite(rev[name])), name
-        np.testing.assert_allclose(rev[name], fwd[name], rtol=0, atol=1e-9 * scale, err_msg=name)
         np.testing.assert_allclose(rev[name], fd[name], rtol=0, atol=1e-4 * scale, err_msg=name)
 
 
