@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _derivative_helpers import jacobian_and_differences
 
 from jaxdeploy.fit import central_differences as fit_central_differences
 from jaxdeploy.fit import output_function, parameter_jacobian
@@ -123,28 +124,27 @@ def test_scalar_loss_gradient_is_the_jacobian_contracted():
     np.testing.assert_allclose(grad, jnp.dot(weights, jac), rtol=1e-10)
 
 
-@pytest.mark.slow  # 67 s of the default suite at 844cb65 (2 cores): kept out of it
+@pytest.mark.slow
 def test_impact_adaptive_steps_replayed_match_central_differences():
-    """Adaptive steps (the impact scene's default control): forward and reverse mode of the
-    replayed run agree with each other to round-off and with central differences over the
-    same steps. (Independence of the checkpoint count, the other symptom of re-decided steps,
-    is checked on a full slider-crank revolution in the slow test below.)"""
+    """Adaptive steps (the impact scene's default control), replayed: forward mode through the
+    run over the unperturbed run's accepted steps matches central differences over the same
+    steps. The differences' runs are the primal outputs of the forward-mode program at θ ± h
+    (one compilation, no separate batch). That forward and reverse mode of this replayed run
+    agree to round-off is checked by test_gradient_function_forward_equals_reverse_to_roundoff
+    (same impact, same replay), and their independence of the checkpoint count on a full
+    slider-crank revolution by the slow test below."""
     scene, base, wrt, t_end, ts, output = _impact_case()
-
-    fwd = parameter_jacobian(scene, base, wrt, output, t_end, mode="forward", ts=ts)
-    rev = parameter_jacobian(scene, base, wrt, output, t_end, ts=ts)
     # Adaptive steps end just past the contact onset (`LocateEvents`: 1e-3 of the step, ~1 ns
     # here). A relative change of 1e-4 in c moves the onset by Δc/v ≈ 4 ns, across that step
     # end, and the difference then straddles two discrete maps; 1e-6 stays inside one. The
     # other parameters keep 1e-4: at 1e-6, σ (0.1 µm) would move the outputs by ~1e-14 m,
     # below the Newton tolerance.
     steps = {name: 1e-6 if name == "clearance" else 1e-4 for name in wrt}
-    fd = fit_central_differences(scene, base, wrt, output, t_end, steps, ts=ts)
+    fwd, fd = jacobian_and_differences(scene, base, wrt, output, t_end, steps, ts=ts)
     for name in wrt:
         scale = np.abs(fd[name]).max()
         assert scale > 0, name
-        np.testing.assert_allclose(rev[name], fwd[name], rtol=0, atol=1e-10 * scale, err_msg=name)
-        np.testing.assert_allclose(rev[name], fd[name], rtol=0, atol=1e-5 * scale, err_msg=name)
+        np.testing.assert_allclose(fwd[name], fd[name], rtol=0, atol=1e-5 * scale, err_msg=name)
 
 
 # Forward against reverse mode on one slider-crank revolution, what agreement can mean.
