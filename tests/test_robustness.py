@@ -458,6 +458,77 @@ def test_potential_energies_are_the_conservative_forces():
     assert float(elements[-1].potential_energy(mech.kinematics(q), None)) > 0.0
 
 
+def _pressed_pair(*elements):
+    """Two bodies, b's hole 3 µm past a 10 µm clearance from a's pin, moving (q, v)."""
+    a = Body("a", 2.0, 0.1, {"pin": (-0.2, 0.0)})
+    b = Body("b", 1.0, 0.05, {"hole": (0.1, 0.0)})
+    mech = Mechanism([a, b], list(elements), {})
+    q = jnp.array([0.1, 0.2, 0.3, 0.0, 0.0, 0.5])
+    pin = mech.kinematics(q).position("a", "pin")
+    hole_offset = mech.kinematics(q).position("b", "hole") - q[3:5]
+    q = q.at[3:5].set(pin + jnp.array([13e-6, 0.0]) - hole_offset)
+    return mech, q
+
+
+def test_elements_declared_conservative_dissipate_nothing():
+    """An element class declaring `conservative` is skipped by the energy meter: its force
+    must be `−∇V` at any state, moving too (every declaring class is checked here)."""
+    from jaxdeploy import mechanism as mech_module
+    from jaxdeploy.mechanism import AbstractElement, Gravity
+
+    declared = {
+        c.__name__
+        for c in vars(mech_module).values()
+        if isinstance(c, type) and issubclass(c, AbstractElement) and c.conservative
+    }
+    elements = [
+        Gravity((0.3, -9.81)),
+        CoilSpringDrive("a", "b", stiffness=2.0, free_angle=1.5, cubic_stiffness=0.7),
+    ]
+    assert declared == {type(e).__name__ for e in elements}
+    mech, q = _pressed_pair(*elements)
+    v = jnp.array([0.3, -0.2, 1.1, -0.4, 0.2, -2.0])
+    memory = mech.init_memory(q, v)
+    forces = jax.jit(lambda q, m: mech.generalized_forces(q, v, 0.0, m))(q, memory)
+    grad_v = jax.jit(jax.grad(lambda q, m: mech.potential_energy(q, m)))(q, memory)
+    np.testing.assert_allclose(np.asarray(forces), -np.asarray(grad_v), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("approach", [0.02, -0.02])  # δ̇ > 0 approaching, < 0 receding
+def test_closed_form_nonconservative_contact_force_is_the_force_plus_the_potential_gradient(
+    approach,
+):
+    """`RevoluteClearance.nonconservative_wrenches` (what the energy meter books as
+    dissipated) against `Q + ∇_q V` computed generically, with damping, friction and rough
+    surfaces, the journal moving into or out of the bore."""
+    from jaxdeploy.mechanism import RevoluteClearance
+    from jaxdeploy.mechanism.meters import EnergyMeter
+
+    joint = RevoluteClearance(
+        "b", "hole", "a", "pin", clearance=1e-5, journal_radius=5e-3,
+        normal=contact.LankaraniNikravesh(contact.RoughElastic(1e9, 2e-6, offset=1.0), 0.7),
+        friction=contact.SmoothCoulomb(0.2),
+    )  # fmt: skip
+    mech, q = _pressed_pair(joint)
+    # b moves along the line of centres (+x: deeper) and slides across it (y).
+    v = jnp.array([0.0, 0.0, 0.0, approach, 0.5, 0.0])
+    (joint_memory,) = mech.init_memory(q, v)
+    assert float(joint_memory["in_contact"]) == 1.0
+    memory = ({**joint_memory, "impact_velocity": jnp.asarray(0.05)},)  # v⁻ of this contact
+    kin = mech.kinematics(q, v)
+    closed = jax.jit(lambda m: EnergyMeter(joint)._nonconservative_force(kin, m))(memory[0])
+    generic = jax.jit(
+        lambda m: (
+            mech.generalized_forces(q, v, 0.0, (m,))
+            + jax.grad(lambda x: mech.potential_energy(x, (m,)))(q)
+        )
+    )(memory[0])
+    forces = mech.generalized_forces(q, v, 0.0, memory)
+    scale = float(jnp.max(jnp.abs(forces)))
+    assert scale > 1.0 and float(jnp.max(jnp.abs(generic))) > 0.1 * scale  # it dissipates
+    np.testing.assert_allclose(np.asarray(closed), np.asarray(generic), rtol=0, atol=1e-12 * scale)
+
+
 def test_energy_meter_does_not_change_the_dynamics():
     scene = Impact(damping="hunt_crossley")
     params = scene.resolve_params({"restitution": 0.6})

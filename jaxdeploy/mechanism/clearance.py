@@ -436,6 +436,18 @@ class RevoluteClearance(AbstractElement):
 
     def wrenches(self, kin: Kinematics, t, memory):
         fn, ft, g = self.side_forces(kin, memory)
+        return self._side_wrenches(fn, ft, g)
+
+    def nonconservative_wrenches(self, kin: Kinematics, t, memory):
+        """The wrenches of the contact forces less their elastic part `F_e(δ)` on each side
+        (whose potential is `potential_energy`): the damping part of the normal force and
+        the friction force, which an energy meter books as dissipated (`AbstractElement`)."""
+        fn, ft, g = self.side_forces(kin, memory)
+        delta = jnp.stack([g.penetration, g.far_penetration])
+        return self._side_wrenches(fn - self.normal.elastic.force(delta), ft, g)
+
+    def _side_wrenches(self, fn, ft, g):
+        """The wrenches of normal forces `fn` and friction forces `ft` [near, far]."""
         f_near = -(fn[0] * g.normal + ft[0] * g.tangent)
         f_far = fn[1] * g.normal + ft[1] * g.tangent
         return [

@@ -59,6 +59,11 @@ class AbstractElement(eqx.Module):
     # (`memory_for_step_beside`, `memory_after_step_beside`), so it does not repeat their
     # updates (a clearance joint's is a root search on the step's interpolant).
     reads_memories: ClassVar[bool] = False
+    # Whether the element's force is exactly `−∇_q V` of its `potential_energy` for every
+    # parameter value (no damping, friction or memory): it dissipates nothing, so an energy
+    # meter books nothing for it instead of evaluating `Q + ∇V` (round-off) twice per step.
+    # tests/test_energy.py checks each such class's force against its potential's gradient.
+    conservative: ClassVar[bool] = False
 
     def constraint(self, kin: Kinematics, t) -> Array:
         return jnp.zeros((0,), dtype=kin.q.dtype)
@@ -70,6 +75,13 @@ class AbstractElement(eqx.Module):
         """Energy `V` (J) whose gradient gives the element's conservative force, `Q = −∇_q V`;
         0 for elements that store none (ideal joints, pure dampers)."""
         return jnp.zeros((), dtype=kin.q.dtype)
+
+    def nonconservative_wrenches(self, kin: Kinematics, t, memory) -> list[Wrench] | None:
+        """The wrenches of the element's force less its conservative part `−∇_q V`, in
+        closed form, or None (the default): an energy meter then computes `Q + ∇_q V`
+        generically (`meters.EnergyMeter`), a second evaluation of the force and a gradient
+        of the potential per state, traced and compiled into every metered run."""
+        return None
 
     def bodies(self) -> tuple[str, ...]:
         """Names of the bodies this element touches (for validation)."""

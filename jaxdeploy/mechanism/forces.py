@@ -33,6 +33,7 @@ class Gravity(AbstractElement):
     """
 
     acceleration: tuple = param(default=(0.0, -9.81))
+    conservative: ClassVar[bool] = True
 
     def wrenches(self, kin: Kinematics, t, memory):
         return [Wrench(body=b.name, force=b.mass * self.acceleration) for b in _massive(kin)]
@@ -152,6 +153,7 @@ class CoilSpringDrive(AbstractElement):
     free_angle: float = param()
     cubic_stiffness: float = param(default=0.0)
     angle_offset: float = param(default=0.0)
+    conservative: ClassVar[bool] = True
 
     def __check_init__(self):
         check_nonnegative("CoilSpringDrive.stiffness", self.stiffness, "N m/rad")

@@ -115,23 +115,44 @@ class EnergyMeter(AbstractElement):
     def _inner_memory(self, method, memory, kin, *step):
         return getattr(self.inner, method)(memory, kin, *step) if self.inner.has_memory else memory
 
+    @property
+    def _memory_kept_for_step(self) -> bool:
+        """Whether the inner element starts each step with the memory the last step left it
+        (no memory, or `memory_for_step` not overridden): then nothing can jump there."""
+        return not self.inner.has_memory or not _overrides(self.inner, "memory_for_step")
+
     def _nonconservative_force(self, kin: Kinematics, inner_memory):
-        """`Q_e + ∇_q V_e` at `kin`, with the inner element's memory."""
+        """`Q_e + ∇_q V_e` at `kin`, with the inner element's memory; exactly 0 for an
+        element whose class declares its force conservative (`AbstractElement.conservative`),
+        which would only meter the round-off of that difference."""
+        if self.inner.conservative:
+            return jnp.zeros_like(kin.q)
+        if _overrides(self.inner, "nonconservative_wrenches"):
+            part = _NonConservativePart(self.inner)
+            part = Mechanism(kin.mechanism.bodies, [part], kin.mechanism.ground_points)
+            return part.generalized_forces(kin.q, kin.v, 0.0, (inner_memory,))
         alone = Mechanism(kin.mechanism.bodies, [self.inner], kin.mechanism.ground_points)
         forces = alone.generalized_forces(kin.q, kin.v, 0.0, (inner_memory,))
         grad_v = jax.grad(lambda q: self.inner.potential_energy(Kinematics(alone, q), inner_memory))
         return forces + grad_v(kin.q)
 
     def _jump(self, kin, before, after):
+        """`V(q; after) − V(q; before)`: what a memory update put into the potential; 0 for
+        an element without memory (the same evaluation twice, skipped at trace time)."""
+        if not self.inner.has_memory:
+            return jnp.zeros((), dtype=kin.q.dtype)
         return self.inner.potential_energy(kin, after) - self.inner.potential_energy(kin, before)
 
     def init_memory(self, kin: Kinematics):
         inner = self.inner.init_memory(kin) if self.inner.has_memory else None
         zero = jnp.zeros((), dtype=kin.q.dtype)
+        # With the memory kept between steps, each step's starting force is computed by the
+        # step before (`after_step`), the first one's here.
+        start = self._nonconservative_force(kin, inner) if self._memory_kept_for_step else None
         return {
             "inner": inner,
             "q_start": kin.q,
-            "force_start": jnp.zeros_like(kin.q),
+            "force_start": jnp.zeros_like(kin.q) if start is None else start,
             "dissipated": zero,
             "injected": zero,
         }
@@ -146,6 +167,10 @@ class EnergyMeter(AbstractElement):
 
     def for_step(self, memory, kin: Kinematics, inner):
         """`memory_for_step` given the inner element's memory for the step, `inner`."""
+        if self._memory_kept_for_step:
+            # Nothing changes between steps: the step's starting force (at this state, with
+            # this memory) was computed at the end of the step before (`after_step`).
+            return {**memory, "q_start": kin.q}
         return {
             "inner": inner,
             "q_start": kin.q,
@@ -155,17 +180,54 @@ class EnergyMeter(AbstractElement):
         }
 
     def after_step(self, memory, kin: Kinematics, inner):
-        """`memory_after_step` given the inner element's memory after the step, `inner`."""
+        """`memory_after_step` given the inner element's memory after the step, `inner`.
+
+        With the memory kept between steps (`_memory_kept_for_step`) the next step starts at
+        this state with the memory `inner`: its starting force is computed here, with the
+        step's ending force in one evaluation vectorised over the two memories (what does not
+        depend on the memory — the kinematics, the contact geometry — is then traced and
+        compiled once, not twice)."""
         step_memory = memory["inner"]
-        force_end = self._nonconservative_force(kin, step_memory)
+        if self._memory_kept_for_step:
+            force_end, force_next = self._forces_with(kin, step_memory, inner)
+        else:
+            force_end = self._nonconservative_force(kin, step_memory)
+            force_next = memory["force_start"]
         work = 0.5 * jnp.dot(memory["force_start"] + force_end, kin.q - memory["q_start"])
         return {
             "inner": inner,
             "q_start": memory["q_start"],
-            "force_start": memory["force_start"],
+            "force_start": force_next,
             "dissipated": memory["dissipated"] - work,
             "injected": memory["injected"] + self._jump(kin, step_memory, inner),
         }
+
+    def _forces_with(self, kin: Kinematics, first, second):
+        """`_nonconservative_force` at `kin` with the inner memories `first` and `second`."""
+        if first is None or self.inner.conservative:
+            force = self._nonconservative_force(kin, first)
+            return force, force
+        both = jax.tree.map(lambda a, b: jnp.stack([a, b]), first, second)
+        forces = jax.vmap(lambda m: self._nonconservative_force(kin, m))(both)
+        return forces[0], forces[1]
+
+
+def _overrides(element: AbstractElement, method: str) -> bool:
+    """Whether `element`'s class overrides `AbstractElement.method`."""
+    return getattr(type(element), method) is not getattr(AbstractElement, method)
+
+
+class _NonConservativePart(AbstractElement):
+    """An element's closed-form non-conservative wrenches (`nonconservative_wrenches`) as an
+    element's wrenches, for `Mechanism.generalized_forces`."""
+
+    inner: AbstractElement
+
+    def wrenches(self, kin: Kinematics, t, memory):
+        return self.inner.nonconservative_wrenches(kin, t, memory)
+
+    def bodies(self):
+        return self.inner.bodies()
 
 
 def metered(mechanism: Mechanism) -> Mechanism:
