@@ -7,6 +7,7 @@ import os
 import signal
 import sys
 
+from . import _program_cache
 from ._compilation_cache import enable_compilation_cache, prefer_cacheable_errors
 
 prefer_cacheable_errors()  # before any command module imports equinox
@@ -27,6 +28,11 @@ def main(argv=None) -> int:
         # argparse has printed the usage error (exit code 2) or the help (0); return the code
         # so that callers of `main` (tests, scripts) see it like any other refusal.
         return exit_.code
+    # The program cache serves this command only: a script or test that calls `main` and
+    # then simulates itself must not read programs from the command's store (its key is the
+    # calls' inputs and the package's code, not settings a caller changed in between).
+    # JAX's compilation cache may stay on: its key is the compiled program itself.
+    programs = _program_cache.folder()
     enable_compilation_cache()
     if argv is None:
         signal.signal(signal.SIGINT, _interrupted(args.command))
@@ -37,6 +43,8 @@ def main(argv=None) -> int:
         # folder's `with` block removes what the run had not finished.)
         print(_interrupt_line(args.command), file=sys.stderr)
         return EXIT_INTERRUPTED
+    finally:
+        _program_cache.enable(programs)
 
 
 def _interrupt_line(command: str) -> str:

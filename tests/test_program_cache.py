@@ -286,3 +286,17 @@ def test_when_traced_calls_back_once_after_the_trace_and_before_the_compile(stor
         _program_cache.enable(None)  # store off: the call is `fn(*args)`, no callback
         _program_cache.call(_toy, x, 2.5, 4)
     assert seen == [1]
+
+
+def test_a_command_called_from_python_leaves_the_program_cache_as_it_found_it(
+    tmp_path, monkeypatch
+):
+    """`jaxdeploy.cli.main([...])` turns the caches on for its command only: a test or script
+    that simulates after it (with a setting the store's key does not see, e.g. a monkeypatched
+    factor size) must not read the command's stored programs."""
+    from jaxdeploy.cli import main
+
+    monkeypatch.setenv("JAXDEPLOY_CACHE_DIR", str(tmp_path / "xla"))
+    before = _program_cache.folder()
+    assert main(["scenes"]) == 0
+    assert _program_cache.folder() == before
