@@ -264,3 +264,69 @@ def test_tolerance_check_measures_the_jacobian_at_the_tighter_tolerance():
     assert [r["rtol"] for r in records] == pytest.approx([1e-3])
     assert records[0]["derivatives_converged"] is True and refitted.derivatives_converged
     assert control.rtol == pytest.approx(1e-3)
+
+
+def test_each_stage_after_the_first_runs_at_a_tolerance_measured_at_its_start_estimate():
+    """`fit(model_error=...)`: before the second stage the model's integration error at the
+    first stage's estimate (rtol against rtol/10 over the longest stage, noise levels RMS) is
+    measured with the compiled model and the tolerance tightened by decades until it is
+    within the limit; the second stage runs there. The record's rule is checked against plain
+    runs (`run_channels`, not the fit's program) at the chosen rtol, 10x tighter and 10x
+    looser. A tolerance already tight enough is kept (never loosened). `replan` replaces the
+    remaining stages (here once, by an extra horizon), and None keeps them."""
+    from jaxdeploy.fit import (
+        MODEL_ERROR,
+        Comparison,
+        ResidualSpec,
+        run_channels,
+        tolerance_at_estimate,
+    )
+    from jaxdeploy.fit._schedule import _scaled, model_difference
+
+    scene = Pendulum()
+    truth = {"length": 0.8, "initial_angle": -0.6}
+    t = np.linspace(0.0, 1.0, 201)
+    # Noise 1e-5 of the signal: Tsit5 at rtol 1e-2 is many noise levels off.
+    data = synthesize(scene, truth, t, ["rod_theta"], seed=4, noise_fraction=1e-5,
+                      control={"rtol": 1e-10, "atol": 1e-10})  # fmt: skip
+    fixed = {"initial_angle": -0.6}
+    stages = [ResidualSpec(windows=((0.0, 0.5),)), ResidualSpec()]
+    loose = {"solver": "tsit5", "rtol": 1e-2, "atol": 1e-5}
+    seen, plans = [], []
+    replanned = [ResidualSpec(windows=((0.0, 0.75),)), ResidualSpec()]
+
+    def replan(done, estimate, control):
+        plans.append((done, estimate, control.rtol))
+        return replanned if len(plans) == 1 else None
+
+    result = fit(scene, data, ["length=0.82:0.1:5"], fixed=fixed, control=loose,
+                 residuals=stages, model_error=MODEL_ERROR, replan=replan,
+                 on_tolerance=lambda k, record: seen.append((k, record)))  # fmt: skip
+    assert [p[0] for p in plans] == [stages[0], replanned[0]]
+    assert [st["spec"]["windows"] for st in result.stages] == [((0.0, 0.5),), ((0.0, 0.75),), None]
+    record = result.stages[1]["tolerance"]
+    assert seen == [(1, record), (2, result.stages[2]["tolerance"])]
+    assert plans[0][1] == record["at"] and plans[0][2] == record["chosen_rtol"]
+    assert "tolerance" not in result.stages[0]
+    assert result.stages[0]["rtol"] == pytest.approx(1e-2)
+    chosen = record["chosen_rtol"]
+    assert record["met"] is True and chosen < 1e-2
+    assert result.stages[1]["rtol"] == pytest.approx(chosen) == result.stages[2]["rtol"]
+    assert result.control.rtol == pytest.approx(chosen)
+    changes = [st["rms_difference_over_sigma"] for st in record["steps"]]
+    assert all(c > MODEL_ERROR for c in changes[:-1]) and changes[-1] <= MODEL_ERROR
+    # The rule, on plain runs at the first stage's estimate.
+    full = Comparison(data, ResidualSpec())
+    params = scene.resolve_params({**fixed, **record["at"]})
+    base = result.control
+
+    def channels(c):
+        return run_channels(scene, params, full.ts, full.names, c)[0]
+
+    at, tighter, looser = channels(base), channels(_scaled(base, 0.1)), channels(_scaled(base, 10))
+    assert model_difference(at, tighter, full) <= MODEL_ERROR < model_difference(looser, at, full)
+    # Already tight enough (at the estimate, with the fit's compiled model): kept.
+    kept, again = tolerance_at_estimate(result.model, result.z, full, _scaled(base, 0.1),
+                                        MODEL_ERROR)  # fmt: skip
+    assert kept.rtol == pytest.approx(chosen / 10) and again["met"] is True
+    assert len(again["steps"]) == 1

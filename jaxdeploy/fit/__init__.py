@@ -35,13 +35,21 @@ from ._fit import (
     fit,
     levenberg_marquardt,
     refit_until_reproducible,
+    tolerance_at_estimate,
     tolerance_check,
 )
 from ._gradcheck import DEFAULT_STEPS, GradientCheck, gradient_check
 from ._parameters import FitParameter, check_not_ignored, make_parameters, parse_param_spec
 from ._plots import plot_fit
 from ._residuals import Comparison, ResidualSpec
-from ._schedule import RTOL_FLOOR, choose_tolerance, impact_horizons, onset_times, run_channels
+from ._schedule import (
+    MODEL_ERROR,
+    RTOL_FLOOR,
+    choose_tolerance,
+    impact_horizons,
+    onset_times,
+    run_channels,
+)
 from ._synthetic import model_channels, synthesize
 
 __all__ = [
@@ -54,6 +62,7 @@ __all__ = [
     "JACOBIAN_CHANGE",
     "RTOL_CHECK_FLOOR",
     "RTOL_FLOOR",
+    "MODEL_ERROR",
     "Comparison",
     "check_not_ignored",
     "choose_tolerance",
@@ -61,6 +70,7 @@ __all__ = [
     "onset_times",
     "refit_until_reproducible",
     "run_channels",
+    "tolerance_at_estimate",
     "tolerance_check",
     "central_differences",
     "DEFAULT_STEPS",

@@ -11,7 +11,10 @@ from those at rtol_(k+1) by at most `MODEL_ERROR` noise levels RMS over the fitt
 Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.4). A model error of 0.2 σ RMS adds 0.04 to
 χ²/dof. rtol_0 is the smaller of the scene's default and 1e-2 σ/RMS(y), never below
 `RTOL_FLOOR` (the search's cost grows ~2x per decade; the check after the fit goes further,
-`refit_until_reproducible`). After the fit `tolerance_check` repeats the
+`refit_until_reproducible`). The start point's model error need not be the truth's, so the
+fit repeats the comparison at each stage's estimate before the next stage and tightens where
+it has grown (`fit(model_error=...)`, `tolerance_at_estimate`, with `tighten`, the search
+itself). After the fit `tolerance_check` repeats the
 comparison at the estimate and computes the Gauss–Newton step a refit at the tighter
 tolerance would take, in standard errors; where it fails, the command refits from the
 estimate at 10x tighter tolerances until it passes (`refit_until_reproducible`): the start
@@ -25,7 +28,9 @@ showing onsets at t_1 < t_2 < …, the fit grows its horizon through the onsets
 `FIRST_IMPACTS`, 2·`FIRST_IMPACTS`, 4·`FIRST_IMPACTS`, …, then (beyond the impacts the start
 run shows) by at most doubling the elapsed time, and ends on the whole record, each stage
 starting from the previous estimate: the windows come from the impact spacing of this
-record, not from constants. A record without impacts gets one stage.
+record, not from constants. The command counts the onsets again in the run at each stage's
+estimate and replaces the remaining horizons by this function's for them (`fit(replan=...)`):
+the start run need not bounce like the data. A record without impacts gets one stage.
 """
 
 from __future__ import annotations
@@ -89,23 +94,37 @@ def choose_tolerance(scene, params: Mapping, comparison, control=None):
             f"the model cannot be simulated at the start point with rtol {rtol0:g}; change the "
             "guess, the bounds or give --rtol"
         )
-    steps = []
+    current, steps, met, (y, traj) = tighten(
+        lambda c: run_channels(scene, params, ts, names, c), comparison, current, (y, traj)
+    )
+    return current, {"chosen_rtol": current.rtol, "met": met, "steps": steps,
+                     "trajectory": traj}  # fmt: skip
+
+
+def tighten(evaluate, comparison, control, first, limit: float = MODEL_ERROR):
+    """`(control, steps, met, result)`: from `control` down by decades, the loosest rtol
+    whose channels differ from those at rtol/10 by at most `limit` noise levels RMS over the
+    fitted samples (`model_difference`; the module docstring's rule), at most `MAX_DECADES`
+    tightenings and none below `RTOL_FLOOR`. `evaluate(control)` → `(channels, extra)`,
+    channels None when the run failed; `first` is its value at `control`. `steps`: one
+    record per comparison; `met`: whether the last one was within `limit` (False also when a
+    tighter run failed or a limit stopped the search); `result`: `evaluate` at the chosen
+    control."""
+    current, result, steps = control, first, []
     for _ in range(MAX_DECADES):
         if current.rtol / 10.0 < RTOL_FLOOR * (1 - 1e-9):
             break
         tighter = _scaled(current, 0.1)
-        y_tight, traj_tight = run_channels(scene, params, ts, names, tighter)
-        if y_tight is None:
+        result_tight = evaluate(tighter)
+        if result_tight[0] is None:
             break
-        diff = model_difference(y, y_tight, comparison)
+        diff = model_difference(result[0], result_tight[0], comparison)
         steps.append({"rtol": current.rtol, "rtol_check": tighter.rtol,
                       "rms_difference_over_sigma": diff})  # fmt: skip
-        if diff <= MODEL_ERROR:
-            return current, {"chosen_rtol": current.rtol, "met": True, "steps": steps,
-                             "trajectory": traj}  # fmt: skip
-        current, y, traj = tighter, y_tight, traj_tight
-    return current, {"chosen_rtol": current.rtol, "met": False, "steps": steps,
-                     "trajectory": traj}  # fmt: skip
+        if diff <= limit:
+            return current, steps, True, result
+        current, result = tighter, result_tight
+    return current, steps, False, result
 
 
 def onset_times(trajectory) -> np.ndarray:
