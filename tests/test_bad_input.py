@@ -32,9 +32,9 @@ def no_solver(monkeypatch):
 
 CLI_CASES = [
     # (scene, assignment, parameter, value as printed, valid range as printed)
-    ("slider_crank", "clearance=0", "clearance", "0.0", "(0, 0.1] m"),
-    ("slider_crank", "clearance=-1e-6", "clearance", "-1e-06", "(0, 0.1] m"),
-    ("deploy_array", "panel1_clearance=0", "panel1_clearance", "0.0", "(0, 0.01] m"),
+    ("slider_crank", "clearance=0", "clearance", "0.0", "[1e-09, 0.1] m"),
+    ("slider_crank", "clearance=-1e-6", "clearance", "-1e-06", "[1e-09, 0.1] m"),
+    ("deploy_array", "panel1_clearance=0", "panel1_clearance", "0.0", "[1e-09, 0.01] m"),
     ("deploy_array", "panel2_ra=-1e-7", "panel2_ra", "-1e-07", "[0, 0.0001] m"),
     ("slider_crank", "sigma=-2e-6", "sigma", "-2e-06", "[0, 0.0001] m"),
     ("slider_crank", "poisson_ratio=0.5", "poisson_ratio", "0.5", "(-1, 0.5)"),
@@ -42,7 +42,9 @@ CLI_CASES = [
     ("slider_crank", "poisson_ratio=0.7", "poisson_ratio", "0.7", "(-1, 0.5)"),
     ("slider_crank", "restitution=0", "restitution", "0.0", "(0, 1]"),
     ("deploy_array", "restitution=1.01", "restitution", "1.01", "(0, 1]"),
-    ("slider_crank", "clearance=nan", "clearance", "nan", "(0, 0.1] m"),
+    ("slider_crank", "clearance=nan", "clearance", "nan", "[1e-09, 0.1] m"),
+    # Below the continuum floor (scenes/_contact.py, CLEARANCE_FLOOR): refused, not run.
+    ("slider_crank", "clearance=1e-300", "clearance", "1e-300", "[1e-09, 0.1] m"),
     ("impact", "impact_speed=inf", "impact_speed", "inf", "(0, 100] m/s"),
     ("deploy_array", "youngs_modulus=1e5", "youngs_modulus", "100000.0", "[1e+06, 1e+13] Pa"),
     ("deploy_array", "friction_coefficient=-0.1", "friction_coefficient", "-0.1", "[0, 2]"),
@@ -276,7 +278,7 @@ def test_every_command_refuses_an_unknown_scene_naming_the_valid_ones(
     [
         ("panel3_ra=1e-6,2e-6", ["unknown parameter 'panel3_ra'", "panel1_ra", "panel2_ra"]),
         ("restitution=0.5,1.5", ["restitution = 1.5", "(0, 1]"]),
-        ("panel1_clearance=0,1e-5", ["panel1_clearance = 0.0", "(0, 0.01] m"]),
+        ("panel1_clearance=0,1e-5", ["panel1_clearance = 0.0", "[1e-09, 0.01] m"]),
     ],
 )
 def test_sweep_refuses_unknown_or_out_of_range_grid_values_before_compiling(

@@ -32,6 +32,19 @@ SLIP_VELOCITY_SPEC = ParamSpec(
     1e-3, 0, 10, "m/s", "friction regularisation velocity v_s (sign(v) ≈ v/v_s below it)", False
 )
 
+# The smallest radial clearance a scene accepts [m]. A continuum contact model of a journal in
+# a bore means nothing below a few atomic spacings (iron's lattice constant is 0.29 nm), and
+# machined hinge clearances are microns (deploy_array's default 50 µm); below 1 nm a run would
+# only resolve round-off of the joint's centre distance (a clearance of 1e-300 m ran and
+# reported accelerations of 0 and a contact force of 1e141 N). Exact fits and zero-clearance
+# limits use the ideal joint (`ideal=True`) instead.
+CLEARANCE_FLOOR = 1e-9
+
+
+def clearance_spec(default: float, high: float, meaning: str) -> ParamSpec:
+    """A radial clearance parameter [m] in [`CLEARANCE_FLOOR`, `high`]."""
+    return ParamSpec(default, CLEARANCE_FLOOR, high, "m", meaning)
+
 
 # The options of scenes with clearance joints (their constructors' keywords).
 NORMAL_LAW_OPTION = OptionSpec(

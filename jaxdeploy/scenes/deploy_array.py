@@ -50,6 +50,7 @@ from ._contact import (
     SLIP_VELOCITY_SPEC,
     check_contact_options,
     clearance_contact_laws,
+    clearance_spec,
 )
 from .base import OptionSpec, ParamSpec, Scene, is_exactly_zero
 
@@ -303,8 +304,8 @@ class DeployArray(Scene):
         c = GEOMETRY["contact_defaults"]["clearance"]
         for owner in self.clearance_joints.values():
             params[f"{owner}_ra"] = ParamSpec(ra, 0, 1e-4, "m", f"{owner} hinge roughness Ra")
-            params[f"{owner}_clearance"] = ParamSpec(
-                c, 0, 1e-2, "m", f"{owner} hinge radial clearance", False
+            params[f"{owner}_clearance"] = clearance_spec(
+                c, 1e-2, f"{owner} hinge radial clearance"
             )
         self.params = params
 

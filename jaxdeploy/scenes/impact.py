@@ -24,6 +24,7 @@ from ._contact import (
     IMPACT_VELOCITY_RULE_OPTION,
     NORMAL_LAWS,
     check_choice,
+    clearance_spec,
 )
 from .base import OptionSpec, ParamSpec, Scene, is_exactly_zero
 
@@ -39,7 +40,7 @@ class Impact(Scene):
         "mass": ParamSpec(1.0, 0, INF, "kg", "journal mass", False),
         "impact_speed": ParamSpec(1.0, 0, 100, "m/s", "approach speed v0", False),
         "stiffness": ParamSpec(1e10, 0, INF, "N/m^1.5", "contact stiffness K", False),
-        "clearance": ParamSpec(1e-4, 0, 0.1, "m", "radial clearance", False),
+        "clearance": clearance_spec(1e-4, 0.1, "radial clearance"),
         "journal_radius": ParamSpec(5e-3, 0, INF, "m", "pin radius", False),
         "sigma": ParamSpec(0.0, 0, 1e-4, "m", "RMS roughness σ (0: Hertz)"),
         "restitution": ParamSpec(0.9, 0, 1, "", "coefficient of restitution", False),

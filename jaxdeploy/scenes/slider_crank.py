@@ -49,6 +49,7 @@ from ._contact import (
     check_contact_options,
     check_joint_geometry,
     clearance_contact_laws,
+    clearance_spec,
     complete_joint_geometry,
     joint_geometry_params,
 )
@@ -73,7 +74,7 @@ class SliderCrank(Scene):
         "slider_mass": ParamSpec(0.14, 0, INF, "kg", "slider mass", False),
         "slider_inertia": ParamSpec(1e-4, 0, INF, "kg m^2", "slider inertia", False),
         "journal_radius": ParamSpec(9.5e-3, 0, INF, "m", "pin radius R_j", False),
-        "clearance": ParamSpec(0.5e-3, 0, 0.1, "m", "radial clearance c = R_b − R_j", False),
+        "clearance": clearance_spec(0.5e-3, 0.1, "radial clearance c = R_b − R_j"),
         "youngs_modulus": ParamSpec(207e9, 1e6, 1e13, "Pa", "Young's modulus (pin and bearing)"),
         "poisson_ratio": ParamSpec(0.3, -1, 0.5, "", "Poisson's ratio", False, False),
         "sigma": ParamSpec(0.0, 0, 1e-4, "m", "combined RMS roughness σ (0: smooth, Hertz)"),
