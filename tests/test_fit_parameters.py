@@ -41,6 +41,9 @@ def test_a_geometry_with_the_bore_inside_the_journal_is_refused():
     scene = get_scene("slider_crank", geometry="bore_journal")
     with pytest.raises(ValueError, match="bore must be larger than the journal"):
         scene.resolve_params({"bore_radius": 0.009, "journal_radius": 0.0095})
+    # Radii 1e-12 m apart: a clearance below the continuum floor, refused as when given.
+    with pytest.raises(ValueError, match="clearance ≥ 1e-09 m"):
+        scene.resolve_params({"bore_radius": 0.0095 + 1e-12, "journal_radius": 0.0095})
     with pytest.raises(ValueError, match="geometry"):
         get_scene("slider_crank", geometry="diameters")
     # clearance is not a parameter when both radii are: it cannot be fitted or set

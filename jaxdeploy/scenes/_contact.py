@@ -123,13 +123,14 @@ def check_joint_geometry(params, geometry: str) -> None:
         return  # both positive by their ranges
     p = complete_joint_geometry(params, geometry)
     b, j, c = p["bore_radius"], p["journal_radius"], p["clearance"]
-    if is_concrete((b, j, c)) and not (float(j) > 0 and float(c) > 0):
+    if is_concrete((b, j, c)) and not (float(j) > 0 and float(c) >= CLEARANCE_FLOOR):
         raise ValueError(
             f"bore_radius = {float(b)!r} m is invalid with "
             + (f"clearance = {float(c)!r} m" if geometry == "bore_clearance"
                else f"journal_radius = {float(j)!r} m")
             + f" (geometry={geometry}): the bore must be larger than the journal "
-            f"(journal_radius = bore_radius − clearance > 0 and clearance > 0)"
+            f"(journal_radius = bore_radius − clearance > 0 and clearance ≥ "
+            f"{CLEARANCE_FLOOR:g} m, CLEARANCE_FLOOR)"
         )  # fmt: skip
 
 
