@@ -409,6 +409,19 @@ def test_gradient_finite_across_latch_engagement():
         assert float(grad[k]) == pytest.approx(fd, rel=1e-5, abs=1e-9), k
 
 
+def _pressed_pair(*elements):
+    """Two bodies a, b and a ground point S; b's hole sits 13 µm from a's pin, 3 µm past a
+    10 µm clearance. **Returns:** the mechanism of `elements` and that q."""
+    a = Body("a", 2.0, 0.1, {"p": (0.3, 0.1), "pin": (-0.2, 0.0)})
+    b = Body("b", 1.0, 0.05, {"p": (-0.1, 0.2), "hole": (0.1, 0.0)})
+    mech = Mechanism([a, b], list(elements), {"S": (1.0, 1.0)})
+    q = jnp.array([0.1, 0.2, 0.3, 0.0, 0.0, 0.5])
+    pin = mech.kinematics(q).position("a", "pin")
+    hole_offset = mech.kinematics(q).position("b", "hole") - q[3:5]
+    q = q.at[3:5].set(pin + jnp.array([13e-6, 0.0]) - hole_offset)
+    return mech, q
+
+
 def test_potential_energies_are_the_conservative_forces():
     """`Q(q, 0) = −∇V(q)` when nothing dissipates: gravity, springs, cubic drive, applied loads,
     an engaged latch and a penetrating rough contact, each against its own potential."""
@@ -421,8 +434,6 @@ def test_potential_energies_are_the_conservative_forces():
         Spring,
     )
 
-    a = Body("a", 2.0, 0.1, {"p": (0.3, 0.1), "pin": (-0.2, 0.0)})
-    b = Body("b", 1.0, 0.05, {"p": (-0.1, 0.2), "hole": (0.1, 0.0)})
     elastic = contact.RoughElastic(1e9, 2e-6, offset=1.0)
     elements = [
         Gravity((0.3, -9.81)),
@@ -442,12 +453,7 @@ def test_potential_energies_are_the_conservative_forces():
             normal=contact.Undamped(elastic),
         ),  # fmt: skip
     ]
-    mech = Mechanism([a, b], elements, {"S": (1.0, 1.0)})
-    # b's hole sits 13 µm from a's pin: 3 µm past the nominal clearance.
-    q = jnp.array([0.1, 0.2, 0.3, 0.0, 0.0, 0.5])
-    pin = mech.kinematics(q).position("a", "pin")
-    hole_offset = mech.kinematics(q).position("b", "hole") - q[3:5]
-    q = q.at[3:5].set(pin + jnp.array([13e-6, 0.0]) - hole_offset)
+    mech, q = _pressed_pair(*elements)
     memory = list(mech.init_memory(q, jnp.zeros(6)))
     memory[6] = {"engaged": jnp.asarray(1.0)}
     memory = tuple(memory)
@@ -456,18 +462,6 @@ def test_potential_energies_are_the_conservative_forces():
     grad_v = jax.jit(jax.grad(lambda q, m: mech.potential_energy(q, m)))(q, memory)
     np.testing.assert_allclose(np.asarray(forces), -np.asarray(grad_v), rtol=1e-10, atol=1e-9)
     assert float(elements[-1].potential_energy(mech.kinematics(q), None)) > 0.0
-
-
-def _pressed_pair(*elements):
-    """Two bodies, b's hole 3 µm past a 10 µm clearance from a's pin, moving (q, v)."""
-    a = Body("a", 2.0, 0.1, {"pin": (-0.2, 0.0)})
-    b = Body("b", 1.0, 0.05, {"hole": (0.1, 0.0)})
-    mech = Mechanism([a, b], list(elements), {})
-    q = jnp.array([0.1, 0.2, 0.3, 0.0, 0.0, 0.5])
-    pin = mech.kinematics(q).position("a", "pin")
-    hole_offset = mech.kinematics(q).position("b", "hole") - q[3:5]
-    q = q.at[3:5].set(pin + jnp.array([13e-6, 0.0]) - hole_offset)
-    return mech, q
 
 
 def test_elements_declared_conservative_dissipate_nothing():
