@@ -1,5 +1,5 @@
-# One command each (see README): `make demo` runs the main job, `make test` the tests (`make
-# test-all` adds the slow independent checks),
+# One command each (see README): `make demo` runs the main job, `make test` every test (`make
+# test-fast` the quick subset, without the slow independent checks),
 # `make bench` regenerates every performance page (docs/performance.md, docs/bench/), `make
 # pages` every generated docs page (docs/pages.md; hours: `make pages-quick` the cheap ones).
 PYTHON ?= python3
@@ -12,25 +12,25 @@ $(BIN)/activate: pyproject.toml
 	$(BIN)/pip install --quiet -e ".[test]"
 	touch $(BIN)/activate
 
-.PHONY: demo test lint bench pages pages-quick
+.PHONY: demo test test-fast lint bench pages pages-quick
 demo: $(BIN)/activate
 	$(BIN)/jaxdeploy simulate --out results/demo --overwrite
 
 # On every core (pytest-xdist), tests handed out one at a time to whichever worker is free.
 PYTEST_WORKERS := -n auto --dist load --maxschedchunk 1
 
-# ruff, then every test not marked slow (pyproject's addopts): what CI runs.
+# ruff, then every test, the slow checks against independent references included (-m
+# overrides pyproject's addopts), longest first (tests/durations.json): what CI runs.
 test: $(BIN)/activate
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/pytest $(PYTEST_WORKERS)
-
-# Every test, the slow independent checks included (-m overrides the addopts), longest first
-# (tests/durations.json). Not yet what CI runs: on a fresh clone of c4635d8 the slow set alone
-# took 92 min on 2 shared cores (load 12-19), the deploy_array fit-recovery test 49 min of it,
-# with 3 failures (see the notes of issue 34).
-test-all: $(BIN)/activate
 	$(BIN)/pytest $(PYTEST_WORKERS) -m "slow or not slow"
+
+# The quick subset for development: ruff and every test not marked slow.
+test-fast: $(BIN)/activate
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/pytest $(PYTEST_WORKERS)
 
 # Measures the committed code (refuses a dirty tree); ~20 min on 2 quiet cores. Run it on a
 # quiet machine: the page records the load average at the start and the end.

@@ -6,7 +6,7 @@ comments) and run with bash in a fresh folder that holds only a link to
 `examples/`, with this checkout's code first on the Python path and the environment's `bin`
 first on PATH (what `source .venv/bin/activate` does, so that line is not run). `make demo` is
 run as its Makefile recipe (the venv is the one running the tests); `make test` and `make
-test-all` are not run: they are the suite this test belongs to (CI runs it).
+test-fast` are not run: they are the suite this test belongs to (CI runs it).
 
 Strict about what matters, tolerant of run time: every command must exit 0, and each tour
 step's "Writes `FOLDER`: `file`, ..." sentence must be true: the command creates one new
@@ -30,7 +30,7 @@ README = os.path.join(ROOT, "README.md")
 BIN = os.path.dirname(sys.executable)
 NOT_RUN = {
     "make test": "the test suite itself (this test is part of it); CI runs it",
-    "make test-all": "the whole test suite, this test included",
+    "make test-fast": "the quick test suite, this test included",
     "source .venv/bin/activate": "the test puts the environment's bin first on PATH",
 }
 
