@@ -2,13 +2,35 @@
 collected tests are ordered longest first for pytest-xdist."""
 
 import json
+import os
 from pathlib import Path
 
-import jax
+# The test processes compile many of the same programs (the scenes' default simulations, the
+# fits' models) in many files and on both xdist workers. They share JAX's persistent
+# compilation cache, in the folder the command line uses (so the in-process tests, the
+# command-line tests and the README's commands share it too; `JAXDEPLOY_CACHE_DIR=off` turns
+# it off). JAX stores no program with a host callback, and equinox's runtime checks are host
+# callbacks unless EQX_ON_ERROR is nan: set before equinox is imported, as the command line
+# does (jaxdeploy/_compilation_cache.py); `simulate` checks the same conditions in Python
+# first. Only XLA's compile is shared (the key is the compiled program itself); jaxdeploy's
+# program store stays off in Python (a monkeypatched setting is not in its key, ae3edd3).
+from jaxdeploy._compilation_cache import cache_dir as _cache_dir  # noqa: E402
 
-import jaxdeploy  # noqa: F401  (enables x64)
+_SHARED_CACHE = _cache_dir()
+if _SHARED_CACHE is not None:
+    os.environ.setdefault("EQX_ON_ERROR", "nan")
+
+import jax  # noqa: E402
+
+import jaxdeploy  # noqa: E402, F401  (enables x64)
 
 assert jax.config.jax_enable_x64, "jaxdeploy must enable float64"
+
+if _SHARED_CACHE is not None and not jax.config.jax_compilation_cache_dir:
+    from jaxdeploy._compilation_cache import usable_folder
+
+    if usable_folder(_SHARED_CACHE, "compilation cache"):
+        jax.config.update("jax_compilation_cache_dir", _SHARED_CACHE)
 
 # Seconds each test took in a full run (`python -m tools.durations RUN.xml` writes it from a
 # pytest --junitxml report). Only the order of the run depends on it, never a verdict.
