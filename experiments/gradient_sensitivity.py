@@ -145,7 +145,7 @@ def main():
     fig.savefig(os.path.join(ROOT, "docs/figures/gradient_sensitivity.png"), dpi=110)
 
     lines = [
-        "d y(t)/d `{PARAM}` on "
+        f"d y(t)/d `{PARAM}` on "
         "the default 2 s "
         "deploy_array run (rtol 1e-6). Columns: ‖AD − FD‖/‖FD‖ for central differences with "
         "steps 1e-2 c and 1e-3 c, pointwise and for 0.05 s block means; noise ratio = "
