@@ -39,6 +39,7 @@ def test_mechanism_page_four_bar_runs(monkeypatch):
     assert np.isfinite(float(namespace["final_rocker_angle"](1e-4)))
 
 
+@pytest.mark.slow  # 71 s on a 2-core machine (f838811): two deploy_array runs vmapped, compiled
 def test_deploy_array_page_batch_example_runs():
     namespace = {}
     for block in _python_blocks("deploy_array.md"):

@@ -42,6 +42,7 @@ def central_differences(scene, base, wrt, output, t_end, ts, control, rel_step):
     )
 
 
+@pytest.mark.slow  # 81 s on a 2-core machine (f838811), the longest of the quick set: make test
 def test_impact_forward_and_reverse_mode_match_central_differences():
     """Journal position and acceleration at times through a rough, damped impact: d/d
     (clearance c, roughness σ, restitution c_e, stiffness K), vector output."""
