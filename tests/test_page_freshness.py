@@ -44,10 +44,8 @@ PROSE = {
 PENDING = {
     page: "not regenerated since its generator records provenance (make pages)"
     for page in (
-        "docs/design.md",
         "docs/identification.md",
         "docs/paper_study.md",
-        "docs/robustness.md",
     )
 }
 
