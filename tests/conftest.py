@@ -2,7 +2,6 @@
 collected tests are ordered longest first for pytest-xdist."""
 
 import json
-import os
 from pathlib import Path
 
 # The test processes compile many of the same programs (the scenes' default simulations, the
@@ -14,11 +13,10 @@ from pathlib import Path
 # does (jaxdeploy/_compilation_cache.py); `simulate` checks the same conditions in Python
 # first. Only XLA's compile is shared (the key is the compiled program itself); jaxdeploy's
 # program store stays off in Python (a monkeypatched setting is not in its key, ae3edd3).
-from jaxdeploy._compilation_cache import cache_dir as _cache_dir  # noqa: E402
+from jaxdeploy._compilation_cache import cache_dir, prefer_cacheable_errors  # noqa: E402
 
-_SHARED_CACHE = _cache_dir()
-if _SHARED_CACHE is not None:
-    os.environ.setdefault("EQX_ON_ERROR", "nan")
+prefer_cacheable_errors()
+_SHARED_CACHE = cache_dir()
 
 import jax  # noqa: E402
 
