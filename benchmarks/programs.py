@@ -70,7 +70,17 @@ def compile_stats(jitted, *args) -> tuple:
     """`(compiled, stats)`: `jitted` (a `jax.jit` or `equinox.filter_jit` function) traced
     and lowered for `args`, then compiled by XLA; `stats`: CPU seconds of this process for
     tracing and lowering and for XLA's compile, the wall time of both, and the compiled
-    program's `operation_count` and `operations_by_part`."""
+    program's `operation_count` and `operations_by_part`.
+
+    JAX's in-memory caches are cleared first: a program this process already traced and
+    compiled (the bench times the same Tsit5 program warm before `program_parts` measures it)
+    would otherwise be lowered from the trace cache and "compiled" by a lookup in
+    `jax._src.interpreters.pxla`'s compilation cache, in 0.00 s (how docs/performance.md's
+    table of program parts, made at 964803f, came to show negative shares).
+    `jax.clear_caches` empties both; the persistent cache is off in the bench's own process."""
+    import jax
+
+    jax.clear_caches()
     wall, cpu = time.perf_counter(), time.process_time()
     lowered = jitted.lower(*args)
     traced_cpu = time.process_time() - cpu

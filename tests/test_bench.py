@@ -189,6 +189,23 @@ def test_compile_stats_attribute_operations_to_the_parts_traced_once():
         compiled(jnp.arange(3.0), 1.0)[0], jitted(jnp.arange(3.0), 1.0)[0]
     )
 
+    # A program the process already compiled is compiled again, not looked up (the bench
+    # times the same program warm before measuring its parts): count XLA's compiles.
+    compiles = []
+
+    def count(event, duration, fun_name="", **kwargs):
+        if event == "/jax/core/compile/backend_compile_duration" and fun_name == "jit(program)":
+            compiles.append(duration)
+
+    jax.monitoring.register_event_duration_secs_listener(count)
+    try:
+        jitted(jnp.arange(3.0), 1.0)
+        before = len(compiles)
+        compile_stats(jitted, jnp.arange(3.0), jnp.asarray(1.0))
+        assert len(compiles) == before + 1
+    finally:
+        jax.monitoring.unregister_event_duration_listener(count)
+
     quarter = {**stats, "xla_compile_cpu_s": stats["xla_compile_cpu_s"] / 4}
     pp = {"rtol": 1e-5, "full": stats, "without projection": quarter}
     lines = page.program_parts_lines(pp)
