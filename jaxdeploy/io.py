@@ -128,13 +128,26 @@ def _git(args, folder):
     return out.stdout
 
 
+# Paths of a checkout that its page generators write (`jaxdeploy.pages`): a change there is
+# not a change of the code, for a page's provenance nor for a run's `code_revision`.
+GENERATED = ("docs/", "README.md")
+
+
+def changed_code(porcelain: str) -> bool:
+    """Whether `git status --porcelain --untracked-files=no` output names a tracked file
+    outside `GENERATED` (a rename counts by its new path, `git status`'s "old -> new")."""
+    paths = (line[3:].split(" -> ")[-1].strip('"') for line in porcelain.splitlines())
+    return any(path and not path.startswith(GENERATED) for path in paths)
+
+
 def code_revision(package_dir: str | None = None) -> dict | None:
     """`{"commit": sha, "dirty": bool}` of the git checkout the package runs from, or `None`
     when it does not run from one (an installed wheel, no git, git failing or slower than
     `GIT_TIMEOUT`). The package counts as running from a checkout only if its own
     `__init__.py` is tracked there: a wheel installed into a virtual environment that lives
     inside some repository (`.venv` in a checkout) is not that repository's code. `dirty`:
-    tracked files differ from the commit (untracked files, e.g. results, are not counted).
+    tracked files differ from the commit (untracked files, e.g. results, are not counted, nor
+    are the generated pages, `GENERATED`: a page written beside a run does not change its code).
 
     **Arguments:**
     - `package_dir`: the package folder (default: this package's).
@@ -146,7 +159,7 @@ def code_revision(package_dir: str | None = None) -> dict | None:
     status = _git(["status", "--porcelain", "--untracked-files=no"], folder)
     if commit is None or status is None:
         return None
-    return {"commit": commit.strip(), "dirty": bool(status.strip())}
+    return {"commit": commit.strip(), "dirty": changed_code(status)}
 
 
 def run_metadata() -> dict:

@@ -27,10 +27,9 @@ import resource
 import subprocess
 import time
 
-from .io import machine_description, replace_block
+from .io import changed_code, machine_description, replace_block
 
 PATTERN = re.compile(r"<!-- provenance (\{.*?\}) -->", flags=re.S)
-GENERATED = ("docs/", "README.md")  # written by the generators: not a change of the code
 ALLOW_DIRTY = "JAXDEPLOY_PAGES_ALLOW_DIRTY"  # set to 1 to write a page from uncommitted code
 
 
@@ -50,11 +49,9 @@ def checkout_root() -> str:
 
 def tree_state(root: str = ".") -> tuple[str, bool]:
     """`(commit, dirty)`: HEAD, and whether tracked files differ from it (untracked files
-    and the generated pages, `GENERATED`, do not count)."""
+    and the generated pages, `io.GENERATED`, do not count)."""
     commit = git("rev-parse", "HEAD", root=root)
-    changed = git("status", "--porcelain", "--untracked-files=no", root=root).splitlines()
-    dirty = any(not line[3:].startswith(GENERATED) for line in changed)
-    return commit, dirty
+    return commit, changed_code(git("status", "--porcelain", "--untracked-files=no", root=root))
 
 
 def start(

@@ -145,6 +145,17 @@ def test_results_record_the_git_commit_and_dirty_flag_of_a_checkout_and_none_oth
     commit = _git(repo, "log", "-1", "--format=%H")
     (package / "result.json").write_text("{}")
     assert io.code_revision(str(package)) == {"commit": commit, "dirty": False}
+    # Nor does a generated page written beside the run (docs/, README.md: `io.GENERATED`):
+    # the design study's runs were marked dirty by pages another generator was writing.
+    (repo / "docs").mkdir()
+    for page in ("docs/page.md", "README.md"):
+        (repo / page).write_text("a\n")
+        _git(repo, "add", page)
+    _git(repo, "commit", "-q", "-m", "pages")
+    commit = _git(repo, "log", "-1", "--format=%H")
+    for page in ("docs/page.md", "README.md"):
+        (repo / page).write_text("b\n")
+    assert io.code_revision(str(package)) == {"commit": commit, "dirty": False}
     (package / "__init__.py").write_text("x = 2\n")
     assert io.code_revision(str(package)) == {"commit": commit, "dirty": True}
     # Not a checkout: a plain folder, and an untracked copy inside a repository (a wheel
