@@ -489,12 +489,44 @@ def _chunk_done(out_dir, record) -> bool:
     return os.path.exists(os.path.join(out_dir, record["file"]))
 
 
-def _progress(enabled, total, initial):
+def _progress(enabled, total, initial, stream=None):
+    """The sweep's progress, updated per finished chunk: a tqdm bar on a terminal; elsewhere
+    (a log file, CI, a pipe) one line per chunk, since a bar redrawn by carriage returns
+    is one ever-growing line there. `None` when not `enabled`."""
     if not enabled:
         return None
-    from tqdm import tqdm
+    stream = sys.stderr if stream is None else stream
+    if stream.isatty():
+        from tqdm import tqdm
 
-    return tqdm(total=total, initial=initial, unit="case", file=sys.stderr, desc="sweep")
+        return tqdm(total=total, initial=initial, unit="case", file=stream, desc="sweep")
+    return _ChunkLines(total, initial, stream)
+
+
+class _ChunkLines:
+    """Progress as lines (`_progress` off a terminal): cases done of all, elapsed time, and
+    the time left at this run's rate (cases done before a `--resume` are not in the rate)."""
+
+    def __init__(self, total, initial, stream):
+        self.total, self.done, self.stream = total, initial, stream
+        self.start, self.initial = time.monotonic(), initial
+
+    def update(self, cases):
+        self.done += cases
+        elapsed = time.monotonic() - self.start
+        line = f"sweep: {self.done}/{self.total} cases ({100 * self.done / self.total:.0f} %)"
+        line += f", {_duration(elapsed)} elapsed"
+        if self.done < self.total and self.done > self.initial:
+            left = elapsed * (self.total - self.done) / (self.done - self.initial)
+            line += f", about {_duration(left)} left"
+        print(line, file=self.stream, flush=True)
+
+    def close(self):
+        pass
+
+
+def _duration(seconds):
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.1f} min"
 
 
 def load_sweep(out_dir: str) -> dict:

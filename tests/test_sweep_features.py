@@ -73,8 +73,13 @@ def swept(tmp_path_factory):
         sweep_module.sweep = original
         listening[0] = False
     assert code == 0, progress.getvalue()
-    # Progress (issue 22 item 2): cases done of all, elapsed<remaining (the ETA).
-    assert re.search(r"10/10 \[\d+:\d+<\d+:\d+", progress.getvalue()), progress.getvalue()
+    # Progress (issue 22 item 2) off a terminal: a line per chunk, cases done of all, the
+    # time left while cases remain (a tqdm bar on a terminal: test_progress_is_a_bar_...).
+    lines = [line for line in progress.getvalue().splitlines() if line.startswith("sweep: ")]
+    done = [line for line in lines if re.match(r"sweep: \d+/10 cases \(\d+ %\)", line)]
+    assert len(done) == 3 and done[-1].startswith("sweep: 10/10 cases (100 %)"), lines
+    assert all("left" in line for line in done[:-1]) and "left" not in done[-1], done
+    assert "\r" not in progress.getvalue()
     assert "10/10 cases in 3 chunks, 0 failed" in printed.getvalue()
     assert "features.csv" in printed.getvalue() and "overview.png" in printed.getvalue()
     return out, compiles, marks
@@ -191,3 +196,27 @@ def test_every_preset_objective_term_has_a_unit():
     assert objective_unit("panel2:peak_vibration[acceleration]") == "m/s²"
     assert objective_unit("panel2:peak_vibration") == "m"
     assert objective_unit("panel1:dominant_frequency") == "Hz"
+
+
+def test_progress_is_a_bar_on_a_terminal_and_lines_elsewhere():
+    """A tqdm bar where a person watches (a terminal); one line per chunk in a log or pipe,
+    whose time left counts only this run's cases (a resumed sweep's earlier ones excluded)."""
+    from tqdm import tqdm
+
+    from jaxdeploy.sweep import _progress
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    bar = _progress(True, 8, 0, stream=Terminal())
+    assert isinstance(bar, tqdm)
+    bar.close()
+    assert _progress(False, 8, 0, stream=Terminal()) is None
+    log = io.StringIO()
+    lines = _progress(True, 8, 4, stream=log)  # resumed: 4 cases were done before
+    lines.update(2)
+    lines.update(2)
+    first, last = log.getvalue().splitlines()
+    assert first.startswith("sweep: 6/8 cases (75 %), ") and "left" in first, first
+    assert last.startswith("sweep: 8/8 cases (100 %), ") and "left" not in last, last
