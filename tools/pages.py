@@ -100,9 +100,9 @@ GENERATORS = (
               "CPU, load 15-20, at b287360: impact 3, deploy 12; long never run, capped by "
               "--budget-min 20", results="results/robustness"),
     Generator("identification", (PY, "experiments/identification.py", "--regenerate", "--rerun"),
-              (f"{I} [identification]",), 32.0, "CPU, load 3-5, at b6bd439"),
+              (f"{I} [identification]",), 55.9, "CPU, load 2-4, at 847ace3 (50 min wall)"),
     Generator("identification_landscape", (PY, "experiments/identification_landscape.py"),
-              (f"{I} [identification_landscape]",), 2.5, "wall of its batch, 148 s (page)"),
+              (f"{I} [identification_landscape]",), 1.2, "CPU, load 2.7, at 847ace3"),
     Generator("identification_independent",
               (PY, "experiments/identification_independent.py", "--rerun"),
               (f"{I} [identification_independent]",), 5.1, "CPU of the four fits, load 2-4 "
@@ -121,8 +121,10 @@ GENERATORS = (
               20.0, "wall, load 6-7, at f663278: grids 800 s + the optimisation",
               results="results/design_study"),
     Generator("paper_study", (PY, "experiments/paper_study.py", "--rerun"),
-              ("docs/paper_study.md",), 95.0,
-              "wall, load 5-10: runs 2821 s (page, at acab80b) + sensitivities 2311 s (1f9a368)"),
+              ("docs/paper_study.md",), 31.5,
+              "CPU, load 2-4, at 847ace3 (38.9 min wall): the 24 runs and their analysis; "
+              "--rerun does not recompute the sensitivities (--sensitivity-only: 3394 s wall "
+              "at load 5-11, page)"),
 )  # fmt: skip
 
 
