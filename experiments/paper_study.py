@@ -35,8 +35,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxdeploy  # noqa: F401  (float64)
+from jaxdeploy import contact, pages
 from jaxdeploy import objectives as ob
-from jaxdeploy import pages
 from jaxdeploy.analysis import paper_claims as pc
 from jaxdeploy.analysis.deploy_array import deploy_array_outputs
 from jaxdeploy.analysis.spectra import welch_psd
@@ -365,6 +365,12 @@ def _rev(revision):
     return revision["commit"][:7] + (" (uncommitted changes)" if revision.get("dirty") else "")
 
 
+def _rev_words(revision):
+    """`_rev` for a sentence: the commit and whether the code was committed."""
+    state = "with uncommitted changes" if revision.get("dirty") else "committed code"
+    return f"commit {revision['commit'][:7]}, {state}"
+
+
 def _cell(text):
     return str(text).replace("|", "\\|")
 
@@ -428,7 +434,8 @@ def write_page(runs, results, sens, record):
         )
     for v, why in CUT.items():
         lines.append(f"| {v} | not run | | | | | {why} |")
-    lines += ["", RUNS_TEXT, "", "## Our numbers (default variant)", "",
+    lines += ["", RUNS_TEXT.format(code=code_bullets(info, sens)), "",
+              "## Our numbers (default variant)", "",
               "| quantity | " + " | ".join(CASE_NAMES) + " |", "|---|" + "---|" * 5]  # fmt: skip
     for name, metric, scale in METRIC_ROWS:
         cells = [f"{ev['default'].value(metric, i) * scale:.4g} ± "
@@ -441,10 +448,7 @@ def write_page(runs, results, sens, record):
         for r in table[v]:
             counts[r["verdict"]] = counts.get(r["verdict"], 0) + 1
         lines.append(f"* {v}: " + ", ".join(f"{n} {k}" for k, n in sorted(counts.items())))
-    signature = ",".join(
-        f"{r['id']}:" + "/".join(table[v][k]["verdict"] for v in main_variants)
-        for k, r in enumerate(table["default"])
-    )
+    signature = _signature(table, main_variants)
     if signature != CAUSES_WRITTEN_FOR:
         print("WARNING: verdicts changed since the causes were written:\n" + signature)
         lines += ["", "> **Stale:** the causes below were written for other verdicts; revise them."]
@@ -460,7 +464,13 @@ def write_page(runs, results, sens, record):
         lines += [f"<details><summary>{v}</summary>", "", "| # | ours | verdict |", "|---|---|---|"]
         lines += [f"| {r['id']} | {_cell(r['ours'])} | {r['verdict']} |" for r in table[v]]
         lines += ["", "</details>", ""]
+    fields = reading_fields(table, ev)
+    stale = []
+    if (signature := _signature(table, region_variants)) != READING_WRITTEN_FOR:
+        print("WARNING: verdicts changed since the readings were written:\n" + signature)
+        stale = ["> **Stale:** the reading below was written for other verdicts; revise it.", ""]
     lines += ["## Where the roughness claims hold: the unknown parameters", "", REGION_TEXT, "",
+              *stale, REGION_READING.format(**fields), "",
               "The restitution–roughness exponent p (c_e(Ra) = 0.9^((Ra/1.6 µm)^p); p = 0 is "
               "the default):", "", *_sweep_lines(table, P_SWEEP, "p"), "",
               "The ploughing law's adhesion part μ_a (μ(Ra) = μ_a + (2/π) Δa(Ra); 0.01 is the "
@@ -470,7 +480,7 @@ def write_page(runs, results, sens, record):
               ""]  # fmt: skip
     lines += sensitivity_lines(sens) if sens else [SENS_MISSING]
     lines += ["", "## Figures", "", f"![cases]({os.path.relpath(figures[0], DOC.parent)})", "",
-              DISCUSSION]  # fmt: skip
+              "## Reading", "", *stale, DISCUSSION.format(**fields)]  # fmt: skip
     text = pages.whole_page("\n".join(lines).rstrip() + "\n", record)
     atomic_write_bytes(str(DOC), text.encode())
     print(f"wrote {DOC}")
@@ -506,16 +516,33 @@ RUNS_TEXT = """\
   variant again at rtol 1e-7, atol 1e-10. **Uncertainty**: every number is the tight run's,
   ± its change from the default tolerance (each variant its own); a comparison counts only
   when the difference exceeds the summed error bars (≈ otherwise).
-* Code: every run but lugre's and p = 4's ran in one process started at commit 9528742 (its
-  record names the commit the worktree had reached when each run finished; the uncommitted
-  changes were this script); lugre and p = 4 at 61e187c. The default model is the same at
-  both: a 0.7 s default run is bitwise identical at 9528742 and 61e187c.
-* Not recomputed for this page: the sensitivities (below).
+{code}
 * Spectra: Welch (0.1 s Hann segments, half overlapping) of the interval-mean Y acceleration
   of each panel's centre after lock (docs/spectral_peak.md); peak frequency refined by a
   parabola; "peak level" = sqrt(P_max Δf), the RMS in the 10 Hz peak bin. Settling: time after
   lock until the 20 ms moving RMS (resting offset over the last 0.2 s removed) stays below 10 %
   of its maximum."""
+
+
+def code_bullets(info, sens):
+    """The code the runs ran, as each cached run's own record (`revision`) names it, and the
+    sensitivities' absence."""
+    by_revision = {}
+    for (variant, tolerance), i in info.items():
+        rev = _rev_words(i["revision"]) if i.get("revision") else "an unrecorded commit"
+        by_revision.setdefault(rev, []).append(f"{variant} ({tolerance})")
+    if len(by_revision) == 1:
+        ((rev, _),) = by_revision.items()
+        lines = [f"* Code: every run at {rev} (each run's record)."]
+    else:
+        lines = ["* Code (each run's record): "
+                 + "; ".join(f"{', '.join(runs)} at {rev}"
+                             for rev, runs in by_revision.items())
+                 + "."]  # fmt: skip
+    if sens is None:
+        lines.append("* Not recomputed for this page: the sensitivities (below).")
+    return "\n".join(lines)
+
 
 CLAIMS_TEXT = """\
 Verdicts: **agrees**, **disagrees**, **partly** (some of the series the claim covers agree,
@@ -527,15 +554,17 @@ Two parameters of the roughness couplings are unknown: the restitution–roughne
 (no published relation fixes it, docs/contact.md) and the adhesion part μ_a of the ploughing
 friction law. Each was swept on the three roughness cases (both tolerances per point); a claim
 that changes verdict along a row holds only in that part of the parameter. The figure shows
-every variant's verdicts.
-
-Reading (for the tables below): no value of either parameter gives R1 or R11 (an extremum in
-Ra). p ≥ 1 moves R3 to "not resolved" and R14 to "partly"; at p ≥ 3 R9 and R10 turn to
-"disagrees" on residuals of 1e-14–1e-13 m at Ra 0.8 µm (c_e ≈ 0.99: the least dissipative
-hinge settles last) — resolved by the error bars, physically nil. R3 (faster decay with
-roughness) holds only at μ_a = 0.04 (μ = 0.068–0.096 over the three Ra); R8 fails at μ_a = 0
-(μ = 0.028 at Ra 0.8 µm); R11 and R12 move between "disagrees", "not resolved" and "partly"
-with μ_a, i.e. with less than their error bars can carry."""
+every variant's verdicts."""
+# The readings' numbers and verdict patterns are computed (`reading_fields`); the prose
+# around them was written for the verdicts of every variant in READING_WRITTEN_FOR.
+REGION_READING = """\
+Reading (for the tables below): {sweep_changes} {gains} R3 (faster decay with roughness)
+agrees at no point; the single steps resolved as faster: {r3_faster}. R8 is {r8}: at μ_a = 0
+(μ = {mu_0} at Ra 0.8 µm) panel 2's Y deviation there, {r8_p2} µm, exceeds panel 1's,
+{r8_p1} µm. R10 turns to "disagrees" at {r10_where} on residuals of {r10_lo}–{r10_hi} m at
+Ra 0.8 µm, {r10_ratio} times those at 1.6 and 3.2 µm (the least dissipative hinges,
+c_e ≈ 0.99, settle last): resolved by the error bars, physically nil. R12's verdicts compare
+panel 1's peak frequencies, all within {f1_sweep} Hz at the sweep points."""
 
 SENS_TEXT = """\
 At Ra 1.6 µm, c 0.05 mm (default variant, {t_end_s:g} s, default tolerance): derivatives of each
@@ -547,11 +576,13 @@ ideal-joint reference differentiated too, the phase windows fixed at its lock ti
 "clearance" and "Ra" both hinges'."""
 
 SENS_MISSING = """\
-Not recomputed for this page: the forward-mode Jacobian (six tangents through two
-simulations) took 3394 s wall for the 1 s horizon at load 5–11, more than this session's CPU
-budget after the 2 s runs. The last computed table (1 s, default variant, at commit 51bc15d)
-is in git history: `git show 51bc15d:docs/paper_study.md`. The code is
-`sensitivities()` in the script (`--sensitivity-only` computes and caches it)."""
+Not computed for this page. `--rerun` recomputes the runs and their analyses, not these
+derivatives: `--sensitivity-only` computes them (`sensitivities()`: the forward-mode Jacobian,
+six tangents through two simulations, and central differences) and caches them in
+`results/paper_study/sensitivity.json`, which every later rendering of the page shows (until
+that file is removed). When last measured, the Jacobian took 3394 s wall for the 1 s horizon
+at load 5–11. The last table (1 s, default variant) was made with older code, at commit
+51bc15d: `git show 51bc15d:docs/paper_study.md`."""
 SENS_READING = """\
 How to read the check: the lock time is a smooth function of the parameters, and its
 forward-mode derivative in the spring stiffness matches the difference. Everything that
@@ -567,16 +598,16 @@ designer can use, and the Jacobian columns other than the lock time's are not.""
 CAUSES_WRITTEN_FOR = (  # default/ploughing/restitution p=1/lugre verdicts per claim
     "R1:disagrees/disagrees/disagrees/agrees,"
     "R2:agrees/agrees/agrees/agrees,"
-    "R3:disagrees/disagrees/not resolved/not resolved,"
+    "R3:not resolved/not resolved/disagrees/disagrees,"
     "R4:partly/disagrees/partly/partly,"
-    "R5:partly/disagrees/partly/partly,"
+    "R5:disagrees/disagrees/partly/disagrees,"
     "R6:not resolved/not resolved/not resolved/not resolved,"
     "R7:disagrees/disagrees/disagrees/disagrees,"
     "R8:agrees/agrees/agrees/agrees,"
-    "R9:partly/partly/not resolved/partly,"
+    "R9:partly/partly/partly/partly,"
     "R10:not resolved/not resolved/not resolved/not resolved,"
     "R11:disagrees/disagrees/disagrees/disagrees,"
-    "R12:partly/disagrees/partly/partly,"
+    "R12:partly/partly/not resolved/partly,"
     "R13:disagrees/disagrees/disagrees/disagrees,"
     "R14:disagrees/partly/partly/partly,"
     "C1:disagrees/disagrees/disagrees/disagrees,"
@@ -584,91 +615,320 @@ CAUSES_WRITTEN_FOR = (  # default/ploughing/restitution p=1/lugre verdicts per c
     "C3:agrees/agrees/agrees/agrees,"
     "C4:partly/partly/partly/partly,"
     "C5:agrees/agrees/agrees/agrees,"
-    "C6:partly/partly/partly/partly,"
+    "C6:partly/partly/partly/disagrees,"
     "C7:disagrees/partly/disagrees/partly"
 )
 CAUSES = {
-    "R1": "Ra as contact softening (default, p) moves the unfolding lag by ≤ 3 %, no maximum; "
-    "ploughing friction raises it monotonically (+47 % from 0.8 to 3.2 µm); only LuGre peaks "
-    "at 1.6 µm, by 1–4 % (1.61, 1.63, 1.56 mrad): resolved by the error bars, small.",
+    "R1": "Ra as contact softening (default, p = 1) moves the unfolding lag by ≤ 3 %, with no "
+    "maximum (the default's is lowest at 1.6 µm: 1.55, 1.51, 1.51 mrad); ploughing friction "
+    "raises it monotonically (+46 % from 0.8 to 3.2 µm); only LuGre peaks at 1.6 µm, by 1–5 % "
+    "(1.61, 1.63, 1.56 mrad): resolved by the error bars, small.",
     "R2": "The preloaded latch seats both hinges after the lock: the angle deviation is the "
-    "latch-up transient, within 13 % across Ra in every variant.",
-    "R3": "The post-lock decay is the latch mode's damping; Ra moves the 10 % settling by "
-    "≤ 10 ms, the wrong way (default 118 → 127 ms) or within the error bars (p = 1, LuGre); "
-    "faster with Ra only for ploughing with μ_a = 0.04 (region below).",
-    "R4": "Default, p and LuGre: the softer rough contact lowers some unfolding deviations, "
-    "not all; ploughing: friction grows with Ra and so do the deviations, the opposite way.",
-    "R5": "The first 0.1 s after the lock is the latch-up impact (lock speed, preload): Ra "
-    "moves it by a few per cent with mixed signs, ploughing friction raises it.",
-    "R6": "By the last 0.2 s of 2 s every case has settled to ≤ 1e-13 m (mostly round-off, "
-    "below the error bars): the stable amplitudes are zero, not comparable, in every variant.",
+    "latch-up transient, within 14 % across Ra in every variant (widest: ploughing, "
+    "2.04–2.33 mrad).",
+    "R3": "The post-lock decay is the latch mode's damping, and no variant resolves it "
+    "speeding up with Ra: within the error bars for default and ploughing (default 113 ± 10, "
+    "122 ± 4, 124 ms), slower at 3.2 µm with p = 1 (122 → 127 ms) and at every step with "
+    "LuGre (112 → 114 → 117 ms).",
+    "R4": "Default, p = 1 and LuGre: Ra moves the unfolding deviations by ≤ 8 % and only some "
+    "fall with it: panel 2's Y in all three (default 353 → 348 → 329 µm), both panels' X as "
+    "well with p = 1. Ploughing: friction grows with Ra and so do panel 1's Y "
+    "(385 → 568 µm) and panel 2's X (183 → 267 µm), the opposite way.",
+    "R5": "The first 0.1 s after the lock is the latch-up impact: Ra moves it by ≤ 6.1 % in "
+    "default, p = 1 and LuGre, and panel 2's X grows with Ra in every variant (default "
+    "128 → 132 → 135 µm; with p = 1 the first step is within the error bars), against the "
+    "paper; only p = 1's panel 1 Y falls (698 → 697 → 695 µm), hence its 'partly'; ploughing "
+    "friction raises panel 1's Y by 10 % (664 → 733 µm).",
+    "R6": "By the last 0.2 s of 2 s every case of these variants has settled to ≤ 6e-14 m "
+    "(mostly round-off, below the error bars): the stable amplitudes are zero, not comparable.",
     "R7": "Geometry of our reconstruction (W24's Fig. 8 and Table 2 are missing): panel 2's "
-    "X deviation is ~4× panel 1's in every variant; not a roughness effect.",
-    "R8": "A geometric ratio of the reconstruction, insensitive to the contact law (lost only "
-    "with μ_a = 0 at Ra 0.8 µm, μ = 0.028).",
-    "R9": "Both tips settle in ~100 ms (the latch mode), in either order by a few ms; the late "
-    "X residuals are round-off, so only some comparisons are resolved.",
-    "R10": "Both tips' stable Y offsets have settled to round-off (≤ 1e-14 m) in every "
-    "variant: not resolved.",
-    "R11": "Panel 1's latch-mode level rises monotonically with Ra in these four variants "
-    "(default 11.6 → 13.2 m/s²; falling for p ≥ 2): no maximum at 1.6 µm.",
-    "R12": "The latch mode (k_L calibrated to the ideal array's 95 Hz) moves by ≤ 1.5 Hz with "
-    "Ra, monotonically: at most one of the paper's two orderings holds.",
-    "R13": "Panel 2's acceleration peaks at 155–178 Hz (its seated hinge J7), not 90–100 Hz, "
+    "X deviation is 3.4–4.2× panel 1's (centres) in every variant; not a roughness effect.",
+    "R8": "A geometric ratio of the reconstruction: panel 2's Y deviation stays below panel 1's "
+    "in every case of these variants (default 329–353 vs 448–464 µm); lost only with μ_a = 0 "
+    "at Ra 0.8 µm (μ = 0.028: 333 vs 312 µm).",
+    "R9": "Panel 2's tip settles before panel 1's wherever the difference is resolved "
+    "(default 101 vs 103, 92 vs 100, 105.4 vs 105.9 ms), never after; the late X residuals "
+    "(≤ 6e-14 m) are round-off within their error bars, so the claim's second half is not "
+    "resolved.",
+    "R10": "Both tips' stable Y offsets have settled to round-off (≤ 1e-14 m) in these "
+    "variants: not resolved.",
+    "R11": "Panel 1's latch-mode level rises with Ra in default, ploughing and p = 1 (default "
+    "11.1 → 12.0 → 13.1 m/s²) and is lowest at 1.6 µm with LuGre (9.93, 9.80, 10.4 m/s²): "
+    "no maximum at 1.6 µm in any.",
+    "R12": "The latch mode (k_L calibrated to the ideal array's 95 Hz) moves by ≤ 2 Hz over "
+    "Ra, monotonically: rising in default and ploughing (87.3 → 88.6 → 89.3 Hz), so 0.8 µm is "
+    "lowest but 3.2 µm, not 1.6 µm, highest; falling with LuGre (89.1 → 88.7 → 87.8 Hz), 1.6 "
+    "µm above 3.2 µm only; within the ±0.8 Hz error bars at p = 1.",
+    "R13": "Panel 2's acceleration peaks at 152–178 Hz (its seated hinge J7), not 90–100 Hz, "
     "in every variant: a latch-model effect, not a roughness one.",
-    "R14": "No variant makes Ra 3.2 µm both the quietest and the fastest to settle: the "
-    "default is not quieter there; ploughing and p = 1 are quieter than 1.6 µm only, LuGre "
-    "settles fastest (84.8 vs 85.7 ms) but is loudest.",
-    "C1": "The unfolding lag grows with clearance (more play, harder impacts) in every "
-    "variant: the paper's 'small clearance enhances collisions' is not what ours do.",
+    "R14": "No variant makes Ra 3.2 µm the quietest: its peak is the highest with ploughing "
+    "and LuGre (LuGre 6.98, 7.47, 8.22 m/s²) and within the error bars at p = 1; it settles "
+    "fastest with p = 1 and LuGre (LuGre 86.3, 86.3, 84.8 ms), faster than 0.8 µm only with "
+    "ploughing; the default is neither quieter nor faster there (peak 9.72, 9.67, 10.0 m/s²; "
+    "settling 98, 81, 96 ms).",
+    "C1": "The unfolding lag grows with clearance (more play, harder impacts: default "
+    "1.26 → 1.51 → 1.93 mrad, peak contact force 6.5 → 14.9 → 20.9 kN) in every variant: the "
+    "paper's 'small clearance enhances collisions' is not what ours do.",
     "C2": "Larger clearance, lower contact stiffness (K ∝ c^(−1/2)) and more impact "
-    "dissipation per cycle: faster post-lock decay, in every variant.",
+    "dissipation per cycle: faster post-lock decay (default 149 → 122 → 102 ms), in every "
+    "variant.",
     "C3": "More play, larger excursions from the ideal path, in every variant.",
-    "C4": "Panel 1's Y grows least (×1.4–1.5) but panel 2's Y most (×3.9–4.5): geometry of "
-    "the reconstruction.",
+    "C4": "Panel 1's Y grows less than its X (×1.44–1.52 vs ×1.84–2.39) but panel 2's Y more "
+    "(×3.86–4.48 vs ×1.35–1.45): geometry of the reconstruction.",
     "C5": "The latch-mode level of panel 1 falls with clearance (softer, more dissipative "
-    "contact), in every variant.",
-    "C6": "Amplitude rises then falls (agrees); panel 2's peak frequency falls monotonically "
-    "(ploughing, LuGre: 277 → 158–177 → 64–72 Hz) or is not resolved at c = 0.1 mm.",
-    "C7": "Panel 2's peak (its hinge mode, 158–278 Hz) lies above panel 1's latch mode except "
-    "at c = 0.1 mm, where with ploughing or LuGre it drops to 64–72 Hz; its level is mostly "
-    "below panel 1's.",
+    "contact; default 16.0 → 12.0 → 7.2 m/s²), in every variant.",
+    "C6": "Panel 2's peak frequency falls from c = 0.01 to 0.05 mm in every variant "
+    "(277 → 176 Hz; LuGre 278 → 157 Hz), against the paper's rise; its amplitude rises then "
+    "falls (default 5.43, 9.67, 7.18 m/s²: agrees) except with LuGre, whose fall at "
+    "c = 0.1 mm is within its ±3 m/s² error bar (4.63, 7.47, 7.63 m/s²).",
+    "C7": "Panel 2's peak (its hinge mode, 157–278 Hz) lies above panel 1's latch mode except "
+    "at c = 0.1 mm with ploughing or LuGre, where it drops to 72–74 Hz, below panel 1's "
+    "81–89 Hz; its level is below panel 1's wherever resolved (default 5.43 vs 16.0 m/s² at "
+    "c = 0.01 mm).",
 }
 
 DISCUSSION = """\
-## Reading
+**Every case settles completely within the 2 s.** By the last 0.2 s the deviations are
+≤ {late_main} m in the four variants of the claim table (≤ {late_all} m at any sweep point),
+mostly round-off, so the paper's "once stable" claims compare zeros: R6 is {r6}; R10 is
+{r10}; {r9_late} of the {r9_n} late comparisons behind R9 are resolved. Whatever keeps the
+paper's arrays fluttering after stabilisation — panel flexibility, a lightly damped latch, an
+excitation — is not in our rigid-panel reconstruction. After the lock the preloaded latch
+seats both hinges: panel 1's spectrum peaks at the {f1} Hz latch mode in every case, panel 2's
+(roughness cases) at {f2} Hz, the mode of its seated hinge, so R13 is {r13}, for a reason that
+lies in the latch model, not in roughness.
 
-**What changed since the previous study.** The runs are 2 s (the paper's horizon, was 1 s),
-each variant has its own tolerance error bars (the variants borrowed the default's), LuGre
-hinge friction is a variant, and the unknown parameters p and μ_a are swept. The longer
-horizon shows that every case settles completely: by the last 0.2 s the deviations are
-≤ 1e-13 m, mostly round-off, so the paper's "once stable" claims (R6, R10, the late half of
-R9) compare zeros and are not resolved (at 1 s the residuals were still picometres and R6 read
-"partly"). Whatever keeps the paper's arrays fluttering after stabilisation — panel
-flexibility, a lightly damped latch, an excitation — is not in our rigid-panel
-reconstruction. After the lock the preloaded latch seats both hinges: panel 1's spectrum peaks
-at the 80–93 Hz latch mode in every case, panel 2's at 155–178 Hz, the mode of its seated
-hinge, so R13 and C7 disagree for a reason that lies in the latch model, not in roughness.
+**Roughness is a weak lever unless it changes friction.** Through the elastic law alone
+(default), roughness moves the unfolding deviations by ≤ {dev_default} %, and of the roughness
+claims the default agrees with {default_agrees} only. {gains_short} The grounded ploughing friction
+makes roughness matter — μ rises from {mu_lo} to {mu_hi} over Ra — but against the paper's
+displacement claims (R4 {plough_r4}, R5 {plough_r5}): more friction, more lag during unfolding
+({plough_lag} from Ra 0.8 to 3.2 µm). LuGre friction, which lets the hinges stick, changes
+magnitudes against the default (unfolding lag {lugre_lag}, panel 2's post-lock level
+{lugre_p2}, over the five cases); R1 agrees with {r1_agrees} only, by a {r1_max} maximum at
+Ra 1.6 µm, and R11, the paper's other extremum in Ra, agrees {r11_agrees}.
 
-**Roughness stays a weak lever unless it changes friction.** Through the elastic law alone
-(default), roughness moves the unfolding deviations by a few per cent and the post-lock
-numbers by less than their trends need. The free restitution coupling changes little at
-p = 1 (c_e 0.95 → 0.81) and, up to the end of its range (p = 4, c_e(3.2 µm) = 0.19), turns no
-roughness claim into "agrees": it takes R3 and R14 from "disagrees" to "not resolved" and
-"partly". The grounded ploughing friction makes roughness matter — μ rises from 0.038 to
-0.066 — but in the direction opposite to the paper's displacement claims (R4, R5): more
-friction, more lag during unfolding; with a larger adhesion part (μ_a = 0.04) the post-lock
-decay does speed up with roughness (R3 agrees), the only roughness claim gained by an unknown
-parameter. LuGre friction, which lets the hinges stick, changes magnitudes (unfolding lag
-+3–8 %, panel 2's post-lock level −18 to −26 %) and gives the only R1 agreement, by a 1–4 % maximum
-at Ra 1.6 µm; no variant gives the paper's other extremum (R11), which would need a mechanism
-with an extremum in Ra.
-
-**Clearance claims do not depend on how roughness acts** (C1–C6 have the same verdict in
-every variant): C2, C3 and C5 agree; C1 still disagrees (our unfolding lag grows with
-clearance). C7 becomes "partly" with ploughing and LuGre, where panel 2's hinge mode drops to
-64–72 Hz at c = 0.1 mm.
+**Clearance.** {c_same} have the same verdict in every variant ({c_same_verdicts}); C1
+disagrees because our unfolding lag grows with clearance (default {c1} mrad). {c_differ}. Both
+differences sit at c = 0.1 mm, where panel 2's peak is not robust: {f_default} Hz in the
+default, {f_plough} Hz with ploughing, whose μ at Ra 1.6 µm ({mu_16}) differs from the
+default's {mu_default:g} by {mu_pct} %, and {f_lugre} Hz with LuGre; the tolerance error bars
+(±{f_default_unc}, ±{f_plough_unc} Hz) do not show this. There C7 gains its agreement with
+ploughing and LuGre, and LuGre's panel 2 level ({lugre_amp} m/s²) is too uncertain for C6's
+fall.
 """
+READING_WRITTEN_FOR = (  # verdicts per claim over VARIANTS in order (clearance: the four run)
+    "R1:disagrees/disagrees/disagrees/disagrees/disagrees/disagrees/agrees/disagrees/"
+    "disagrees,"
+    "R2:agrees/agrees/agrees/agrees/agrees/agrees/agrees/agrees/agrees,"
+    "R3:not resolved/not resolved/disagrees/not resolved/not resolved/not resolved/disagrees/"
+    "disagrees/not resolved,"
+    "R4:partly/disagrees/partly/partly/disagrees/partly/partly/disagrees/disagrees,"
+    "R5:disagrees/disagrees/partly/partly/disagrees/partly/disagrees/disagrees/partly,"
+    "R6:not resolved/not resolved/not resolved/not resolved/not resolved/not resolved/"
+    "not resolved/not resolved/not resolved,"
+    "R7:disagrees/disagrees/disagrees/disagrees/disagrees/disagrees/disagrees/disagrees/"
+    "disagrees,"
+    "R8:agrees/agrees/agrees/agrees/agrees/agrees/agrees/partly/agrees,"
+    "R9:partly/partly/partly/partly/not resolved/partly/partly/partly/partly,"
+    "R10:not resolved/not resolved/not resolved/disagrees/not resolved/not resolved/"
+    "not resolved/not resolved/disagrees,"
+    "R11:disagrees/disagrees/disagrees/disagrees/not resolved/disagrees/disagrees/disagrees/"
+    "not resolved,"
+    "R12:partly/partly/not resolved/partly/partly/partly/partly/disagrees/partly,"
+    "R13:disagrees/disagrees/disagrees/disagrees/disagrees/disagrees/disagrees/disagrees/"
+    "disagrees,"
+    "R14:disagrees/partly/partly/partly/partly/partly/partly/partly/partly,"
+    "C1:disagrees/disagrees/disagrees/disagrees,"
+    "C2:agrees/agrees/agrees/agrees,"
+    "C3:agrees/agrees/agrees/agrees,"
+    "C4:partly/partly/partly/partly,"
+    "C5:agrees/agrees/agrees/agrees,"
+    "C6:partly/partly/partly/disagrees,"
+    "C7:disagrees/partly/disagrees/partly"
+)
+
+
+def _verdict(table, variant, claim):
+    return next((r["verdict"] for r in table[variant] if r["id"] == claim), None)
+
+
+def _signature(table, variants):
+    """`claim:verdict/verdict/…` over `variants`, the verdicts a text was written for."""
+    return ",".join(
+        f"{r['id']}:" + "/".join(v for v in (_verdict(table, x, r["id"]) for x in variants) if v)
+        for r in table["default"]
+    )
+
+
+def _pattern(table, claim):
+    """'"verdict" in every variant' (of those with the claim), with the exceptions named."""
+    by = {}
+    for v in table:
+        if verdict := _verdict(table, v, claim):
+            by.setdefault(verdict, []).append(v)
+    (common, _), *rest = sorted(by.items(), key=lambda kv: -len(kv[1]))
+    others = [f"{v} ({verdict})" for verdict, vs in rest for v in vs]
+    return f'"{common}" in every variant' + (" but " + ", ".join(others) if others else "")
+
+
+def _ids(ids):
+    return ", ".join(ids[:-1]) + f" and {ids[-1]}" if len(ids) > 1 else "".join(ids)
+
+
+def _span(values, fmt=".0f", unit=""):
+    """'lo–hi unit' ('lo to hi' for signed numbers), or one number if they round alike."""
+    lo, hi = (f"{x:{fmt}}".replace("-", "−") for x in (min(values), max(values)))
+    return (lo if lo == hi else f"{lo}{' to ' if '+' in fmt else '–'}{hi}") + unit
+
+
+def _ploughing_mu(ra, adhesion=None):
+    """μ(Ra) of the ploughing variant's law, with its default adhesion part unless given."""
+    p = DeployArray(**PLOUGHING).resolve_params(
+        {} if adhesion is None else {"friction_adhesion": adhesion}
+    )
+    return float(contact.PloughingFriction(p["friction_adhesion"], p["tool_nose_radius"])(ra))
+
+
+SWEEPS = (("p", P_SWEEP), ("μ_a", MU_A_SWEEP))
+
+
+def _values(ev, variants, metric, cases):
+    """The metric over the variants and cases run."""
+    return [ev[v].value(metric, i) for v in variants for i in cases if ev[v].values[i] is not None]
+
+
+def _sweep_fields(table, ev):
+    """Along the sweeps: the roughness claims that change verdict, the agreements a point
+    gains over the default, R3's steps resolved as faster, R8's loss and R10's residuals."""
+    roughness = [r["id"] for r in table["default"] if r["id"].startswith("R")]
+    agreed = [c for c in roughness if _verdict(table, "default", c) == "agrees"]
+    changes, gained, faster = [], [], []
+    for label, sweep in SWEEPS:
+        points = {x: v for x, v in sweep.items() if v in table}
+        moving = [c for c in roughness if len({_verdict(table, v, c) for v in points.values()}) > 1]
+        changes.append(f"along {label}, {_ids(moving) or 'none'}")
+        gained += [f"{c} at {label} = {x:g}" for x, v in points.items() for c in roughness
+                   if _verdict(table, v, c) == "agrees" and c not in agreed]  # fmt: skip
+        for x, v in points.items():
+            for a, b in zip(R, R[1:], strict=False):
+                if ev[v].compare("angle_settling", a, "angle_settling", b) == ">":
+                    ms = " → ".join(f"{ev[v].value('angle_settling', i) * 1e3:.0f}" for i in (a, b))
+                    faster.append(f"{ms} ms from Ra {CASES[a][0] / UM:g} to "
+                                  f"{CASES[b][0] / UM:g} µm at {label} = {x:g}")  # fmt: skip
+    # The restitution sweep's points where R10 turns to "disagrees", and their residuals.
+    r10 = [(x, v) for x, v in P_SWEEP.items()
+           if v in table and _verdict(table, v, "R10") == "disagrees"]  # fmt: skip
+    tips = [f"{panel}_tip_y_late_rms" for panel in ("panel1", "panel2")]
+    at_08 = [ev[v].value(k, 0) for _, v in r10 for k in tips] or [0.0]
+    ratios = [ev[v].value(k, 0) / ev[v].value(k, i) for _, v in r10 for k in tips for i in R[1:]]
+    a0 = ev[MU_A_SWEEP[0.0]]
+    sweep_points = [v for _, sweep in SWEEPS for v in sweep.values() if v in table]
+    return {
+        "sweep_changes": "claims that change verdict: " + "; ".join(changes) + ".",
+        "gains": f'No point of either sweep turns a roughness claim to "agrees" that the default '
+        f"does not already agree with ({_ids(agreed)})."
+        if not gained
+        else f"Agreements the default lacks: {_ids(gained)}.",
+        "gains_short": "Neither unknown parameter adds an agreement (previous section)."
+        if not gained
+        else f"The unknown parameters add {_ids(gained)}.",
+        "r3_faster": "; ".join(faster) or "none",
+        "r8": _pattern(table, "R8"),
+        "mu_0": f"{_ploughing_mu(CASES[0][0], 0.0):.3f}",
+        "r8_p1": f"{a0.value('panel1_centre_y_deploy', 0) / UM:.0f}",
+        "r8_p2": f"{a0.value('panel2_centre_y_deploy', 0) / UM:.0f}",
+        "r10_where": "p = " + ", ".join(f"{x:g}" for x, _ in r10) if r10 else "no p",
+        "r10_lo": f"{min(at_08):.0e}",
+        "r10_hi": f"{max(at_08):.0e}",
+        "r10_ratio": _span(ratios or [0.0]),
+        "f1_sweep": _span(_values(ev, sweep_points, "panel1_freq_locked", R)),
+    }
+
+
+def _settled_fields(table, ev):
+    """The late residuals, the claims that compare them, and the post-lock peaks."""
+    main = [v for v in FULL if v in table]
+    late = [k for k in ev["default"].values[0] if k.endswith("_late_rms")]
+    late_max = {v: max(max(_values(ev, [v], k, range(5))) for k in late) for v in table}
+    r9 = [ev[v].compare("panel2_tip_x_late_rms", i, "panel1_tip_x_late_rms", i)
+          for v in table for i in R]  # fmt: skip
+    return {
+        "late_main": f"{max(late_max[v] for v in main):.0e}",
+        "late_all": f"{max(late_max.values()):.0e}",
+        "r6": _pattern(table, "R6"),
+        "r10": _pattern(table, "R10"),
+        "r9_late": sum(c != "≈" for c in r9) or "none",
+        "r9_n": len(r9),
+        "f1": _span(_values(ev, table, "panel1_freq_locked", range(5))),
+        "f2": _span(_values(ev, table, "panel2_freq_locked", R)),
+        "r13": _pattern(table, "R13"),
+    }
+
+
+def _friction_fields(table, ev):
+    """What roughness does through the elastic law alone, through ploughing friction, and
+    what LuGre friction changes against the default."""
+    d, pl, lu = ev["default"], ev["ploughing"], ev["lugre"]
+    deploy = ["angle_dev_deploy"] + [f"{p}_centre_{a}_deploy" for p in ("panel1", "panel2")
+                                     for a in "xy"]  # fmt: skip
+    spread = max(max(d.value(k, i) for i in R) / min(d.value(k, i) for i in R) for k in deploy)
+    lag = [lu.value("angle_dev_deploy", i) / d.value("angle_dev_deploy", i) for i in range(5)]
+    p2 = [lu.value("panel2_amp_locked", i) / d.value("panel2_amp_locked", i) for i in range(5)]
+    r1 = [lu.value("angle_dev_deploy", 1) / lu.value("angle_dev_deploy", i) for i in (0, 2)]
+    lag_ploughing = pl.value("angle_dev_deploy", 2) / pl.value("angle_dev_deploy", 0)
+    r11 = [v for v in table if _verdict(table, v, "R11") == "agrees"]
+    return {
+        "dev_default": f"{(spread - 1) * 100:.0f}",
+        "default_agrees": _ids([r["id"] for r in table["default"]
+                                if r["id"].startswith("R") and r["verdict"] == "agrees"]),
+        "mu_lo": f"{_ploughing_mu(CASES[0][0]):.3f}",
+        "mu_hi": f"{_ploughing_mu(CASES[2][0]):.3f}",
+        "plough_r4": _verdict(table, "ploughing", "R4"),
+        "plough_r5": _verdict(table, "ploughing", "R5"),
+        "plough_lag": _span([(lag_ploughing - 1) * 100], "+.0f", " %"),
+        "lugre_lag": _span([(x - 1) * 100 for x in lag], "+.0f", " %"),
+        "lugre_p2": _span([(x - 1) * 100 for x in p2], "+.0f", " %"),
+        "r1_agrees": _ids([v for v in table if _verdict(table, v, "R1") == "agrees"]) or "none",
+        "r1_max": _span([(x - 1) * 100 for x in r1], ".0f", " %"),
+        "r11_agrees": f"in {_ids(r11)}" if r11 else "in no variant",
+    }  # fmt: skip
+
+
+def _clearance_fields(table, ev):
+    """The clearance claims' verdict pattern and panel 2's peak at c = 0.1 mm."""
+    main = [v for v in FULL if v in table]
+    clearance = [r["id"] for r in table["default"] if r["id"].startswith("C")]
+    same = [c for c in clearance if len({_verdict(table, v, c) for v in main}) == 1]
+    by = {}
+    for c in same:
+        by.setdefault(_verdict(table, "default", c), []).append(c)
+    d, pl, lu = ev["default"], ev["ploughing"], ev["lugre"]
+    mu_16 = _ploughing_mu(CASES[1][0])
+    mu_default = DeployArray().resolve_params()["friction_coefficient"]
+    return {
+        "c_same": _ids(same),
+        "c_same_verdicts": "; ".join(f'{_ids(cs)} "{verdict}"' for verdict, cs in by.items()),
+        "c1": " → ".join(f"{d.value('angle_dev_deploy', i) * 1e3:.2f}" for i in C),
+        "c_differ": "; ".join(f"{c} is {_pattern({v: table[v] for v in main}, c)}"
+                              for c in clearance if c not in same),
+        "f_default": f"{d.value('panel2_freq_locked', 4):.0f}",
+        "f_plough": f"{pl.value('panel2_freq_locked', 4):.0f}",
+        "f_lugre": f"{lu.value('panel2_freq_locked', 4):.0f}",
+        "f_default_unc": f"{d.uncertainty('panel2_freq_locked', 4):.2g}",
+        "f_plough_unc": f"{pl.uncertainty('panel2_freq_locked', 4):.2g}",
+        "mu_16": f"{mu_16:.4f}",
+        "mu_default": mu_default,
+        "mu_pct": f"{abs(mu_16 / mu_default - 1) * 100:.1f}",
+        "lugre_amp": f"{lu.value('panel2_amp_locked', 4):.1f} ± "
+                     f"{lu.uncertainty('panel2_amp_locked', 4):.1g}",
+    }  # fmt: skip
+
+
+def reading_fields(table, ev):
+    """The numbers and verdict patterns the two readings cite, from the tables they read."""
+    return (_sweep_fields(table, ev) | _settled_fields(table, ev)
+            | _friction_fields(table, ev) | _clearance_fields(table, ev))  # fmt: skip
 
 
 def main(argv=None) -> int:
