@@ -128,6 +128,14 @@ def _git(args, folder):
     return out.stdout
 
 
+def duration_text(seconds: float) -> str:
+    """`seconds` in the largest unit that keeps the number ≥ 1 (days, hours, minutes, s)."""
+    for unit, size in (("days", 86400.0), ("hours", 3600.0), ("minutes", 60.0)):
+        if seconds >= size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds:.3g} s"
+
+
 # Paths of a checkout that its page generators write (`jaxdeploy.pages`): a change there is
 # not a change of the code, for a page's provenance nor for a run's `code_revision`.
 GENERATED = ("docs/", "README.md")

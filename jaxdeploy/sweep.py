@@ -48,6 +48,7 @@ from .io import (
     atomic_write_json,
     atomic_write_npz,
     check_output_dir,
+    duration_text,
     run_metadata,
     strict_json,
 )
@@ -515,18 +516,14 @@ class _ChunkLines:
         self.done += cases
         elapsed = time.monotonic() - self.start
         line = f"sweep: {self.done}/{self.total} cases ({100 * self.done / self.total:.0f} %)"
-        line += f", {_duration(elapsed)} elapsed"
+        line += f", {duration_text(elapsed)} elapsed"
         if self.done < self.total and self.done > self.initial:
             left = elapsed * (self.total - self.done) / (self.done - self.initial)
-            line += f", about {_duration(left)} left"
+            line += f", about {duration_text(left)} left"
         print(line, file=self.stream, flush=True)
 
     def close(self):
         pass
-
-
-def _duration(seconds):
-    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.1f} min"
 
 
 def load_sweep(out_dir: str) -> dict:

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import os
 
+from ..io import duration_text  # noqa: F401  (the commands' estimates use it from here)
+
 # Bytes of a float64.
 FLOAT_BYTES = 8
 # Copies of the saved states a run holds at once: the device buffer, its NumPy copy, the
@@ -50,14 +52,6 @@ def size_text(n_bytes: float) -> str:
         if n_bytes >= size:
             return f"{n_bytes / size:.3g} {unit}"
     return f"{n_bytes:.0f} B"
-
-
-def duration_text(seconds: float) -> str:
-    """`seconds` in the largest unit that keeps the number ≥ 1 (days, hours, minutes, s)."""
-    for unit, size in (("days", 86400.0), ("hours", 3600.0), ("minutes", 60.0)):
-        if seconds >= size:
-            return f"{seconds / size:.3g} {unit}"
-    return f"{seconds:.3g} s"
 
 
 def saved_state_bytes(mechanism, n_save: int, runs: int = 1, memory: int | None = None) -> int:
