@@ -151,7 +151,9 @@ def enable_caches(path: str | os.PathLike | None = None) -> str | None:
     `jax.export`: see `jaxdeploy/_program_cache.py` for what its key holds), and XLA loads
     the compiled program from JAX's persistent compilation cache instead of compiling it.
     Results are bit for bit those of an uncached run; new parameter values reuse the
-    programs (they are data).
+    programs (they are data). A script run again also reads the compiled programs its last
+    run ran in a background thread from this call on, while it builds (`_read_ahead`; named
+    by the script's path, so not for `python -c` or an interactive session).
 
     **Arguments:** `path`: the compilation cache's folder; the program cache goes beside it
     in `path + "-programs"`. Default: `$JAXDEPLOY_CACHE_DIR`, else
@@ -191,7 +193,20 @@ def enable_caches(path: str | os.PathLike | None = None) -> str | None:
             RuntimeWarning,
             stacklevel=2,
         )
-    return _enable(chosen)
+    enabled = _enable(chosen)
+    _read_ahead_for_script()
+    return enabled
+
+
+def _read_ahead_for_script() -> None:
+    """A script run again reads the compiled programs its last run ran in a background thread
+    while it goes on (`_read_ahead`, named by the script's path); nothing for an interactive
+    session or `python -c`."""
+    from . import _read_ahead
+
+    script = sys.argv[0] if sys.argv else ""
+    if script and os.path.isfile(script):
+        _read_ahead.start("python " + os.path.abspath(script))
 
 
 def _heal_damaged_entries() -> None:

@@ -65,6 +65,11 @@ _unexportable: set[str] = set()
 _loaded: dict[str, tuple] = {}
 _compiled: dict[str, object] = {}
 _hook = threading.local()
+# Kept executables being read ahead in a background thread (`_read_ahead`), by path, and
+# those this process ran, by path in the order of first use, with whether they call LAPACK.
+_ahead: dict[str, object] = {}
+_run: dict[str, bool] = {}
+_taken_ahead: list[str] = []
 
 # JAX settings that change what a function traces to (dtypes, precision, promotion rules).
 _TRACE_SETTINGS = (
@@ -276,13 +281,9 @@ def _executable(cache_key, path, exported, arrays):
     compiled = _compiled.get(cache_key)
     if compiled is not None:
         return compiled
-    if b"lapack_" in bytes(exported.mlir_module_serialized):
-        # What `jax.export` does before lowering such a program and JAX's lowering of a
-        # LAPACK call: load the LAPACK kernels (scipy's), which a program read back calls.
-        import numpy as np
-        from jaxlib import lapack
-
-        lapack.prepare_lapack_call("getrf_ffi", np.float64)
+    lapack = b"lapack_" in bytes(exported.mlir_module_serialized)
+    if lapack:
+        prepare_lapack()
     if jax.device_count() > 1:
         # A kept executable is read back onto every device of the process: a one-device
         # program then fails with "Expected args to execute_sharded_on_local_devices to have
@@ -291,8 +292,14 @@ def _executable(cache_key, path, exported, arrays):
         _compiled[cache_key] = compiled
         return compiled
     where = _executable_path(path)
+    _run.setdefault(where, lapack)
     began = time.time()
-    compiled = _load_executable(where)
+    ahead = _ahead.pop(where, None)
+    compiled = None if ahead is None else ahead.result()
+    if compiled is not None:
+        _taken_ahead.append(where)
+    else:
+        compiled = _load_executable(where)
     if compiled is None:
         compiled = _compile_and_keep(exported, arrays, where)
     else:  # reported like JAX's compile events (a command's phases count it as compiling)
@@ -395,7 +402,49 @@ def _executable_path(path: str) -> str:
     return f"{path.removesuffix('.jaxexport')}-{_machine()}.executable"
 
 
-def _load_executable(path):
+def prepare_lapack() -> None:
+    """What `jax.export` does before lowering a program with a LAPACK call, and JAX's lowering
+    of one: load the LAPACK kernels (scipy's), which a program read back calls."""
+    import numpy as np
+    from jaxlib import lapack
+
+    lapack.prepare_lapack_call("getrf_ffi", np.float64)
+
+
+def reading_ahead(where: str, future) -> None:
+    """`future` will hold the executable kept at `where` (or None), read by `_read_ahead`:
+    `_executable` takes it instead of reading the file itself."""
+    _ahead[where] = future
+
+
+def executables_run() -> dict[str, bool]:
+    """The kept executables' paths this process ran, in the order of first use, each with
+    whether its program calls LAPACK (`_read_ahead` remembers them)."""
+    return dict(_run)
+
+
+def executables_read_ahead() -> list[str]:
+    """The kept executables this process took from `_read_ahead` instead of reading them."""
+    return list(_taken_ahead)
+
+
+def machine() -> str:
+    """The machine part of a kept executable's name (`_machine`)."""
+    return _machine()
+
+
+def store_file(path: str, payload: bytes) -> None:
+    """Write `payload` at `path` whole (`_store`; a folder that cannot be written is skipped)."""
+    _store(path, payload)
+
+
+def load_executable_quietly(path):
+    """`_load_executable` without its warning (the caller's fallback reads the file again and
+    warns then)."""
+    return _load_executable(path, quiet=True)
+
+
+def _load_executable(path, quiet: bool = False):
     """The executable kept at `path`, or None when there is none or it cannot be loaded."""
     from jax.experimental.serialize_executable import deserialize_and_load
 
@@ -408,6 +457,8 @@ def _load_executable(path):
         stored = pickle.loads(payload)
         return deserialize_and_load(stored["executable"], stored["in_tree"], stored["out_tree"])
     except Exception as err:  # noqa: BLE001 - any unreadable executable is compiled again
+        if quiet:
+            return None
         warnings.warn(
             f"ignoring the unreadable compiled program {path} ({type(err).__name__}: {err}); "
             "compiling it again",

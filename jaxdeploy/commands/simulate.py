@@ -141,6 +141,7 @@ def _duration(seconds: float) -> str:
 def run(args) -> int:
     """validate → build → plan → run and write; every refusal (exit 2) comes before the
     output folder is taken and before the run is compiled: a bad run leaves nothing behind."""
+    _read_ahead(args)
     try:
         scene, params, control, t_end = _validate(args)
     except ValueError as err:
@@ -151,6 +152,18 @@ def run(args) -> int:
         return _build_and_run(args, scene, params, control, t_end, out, drawing)
     finally:
         drawing.close()
+
+
+def _read_ahead(args) -> None:
+    """Start reading the compiled programs the last run of these settings ran (`_read_ahead`),
+    before the imports and the build: the settings that choose the programs name the hint
+    (`--set` values and times are the programs' data; the solver, the tolerance that
+    `--solver auto` goes by, fixed steps, the saved times' count and the reference are not)."""
+    from .. import _read_ahead
+
+    chosen = [args.scene or DEFAULT_SCENE, sorted(args.scene_option), args.n_save, args.solver,
+              args.rtol, args.dt is not None, args.no_reference]  # fmt: skip
+    _read_ahead.start("jaxdeploy simulate " + repr(chosen))
 
 
 def _start_figures(scene):
