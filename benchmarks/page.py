@@ -618,8 +618,9 @@ def whole_process_section(w: dict) -> list[str]:
         lines += [
             "The README's Python example as a script (`jd.enable_caches(DIR)` first, then the "
             "slider-crank with clearance 1e-4 m, Tsit5 at rtol 1e-8, 0.024 s) in two new "
-            "processes sharing DIR: the second reads the programs the first traced and "
-            "compiled.",
+            "processes sharing DIR, run from its file as a user runs a script: the second "
+            "reads the programs the first traced and compiled, in a background thread from "
+            "`enable_caches` on (`jaxdeploy/_read_ahead.py`).",
             "",
             "| process | `import jaxdeploy` [s] | import → first result, wall [s] | its CPU [s] | "
             "whole process wall [s] | whole process CPU [s] |",

@@ -138,13 +138,18 @@ def slider_crank_vs_script(root: str = ".") -> dict:
 
 
 def python_script_second_process() -> dict:
-    """The README's Python example in two new processes sharing one cache folder."""
+    """The README's Python example in two new processes sharing one cache folder, run as a
+    user runs a script: from its file (a script's second process reads its programs ahead,
+    `jaxdeploy/_read_ahead.py`, by the script's path)."""
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         env = _environment(None)
         env.pop("JAXDEPLOY_CACHE_DIR")
+        script = os.path.join(tmp, "study.py")
+        with open(script, "w", encoding="utf-8") as f:
+            f.write(PYTHON_SCRIPT)
         for run in ("first", "second"):
-            done = _run([sys.executable, "-c", PYTHON_SCRIPT, os.path.join(tmp, "cache")], env)
+            done = _run([sys.executable, script, os.path.join(tmp, "cache")], env)
             report = json.loads(done["stdout"].strip().splitlines()[-1])
             if report["status"] != "ok":
                 raise RuntimeError(f"the Python script's run failed: {report['status']}")
