@@ -165,7 +165,7 @@ def test_impact_adaptive_steps_replayed_match_central_differences():
 # the build that runs: twice the larger move of that row under c_e(1 ± 1e-14) (a perturbation
 # of ~90 ulp, the scale of the round-off the two orders accumulate), and no tighter than
 # MODES_AGREE_FLOOR, 5x the largest difference measured where the derivative is well
-# conditioned (AVX-512's 2.1e-9 at 2.4 ms; the input perturbation moves that row by 30x
+# conditioned (AVX-512's 2.1e-9 at 2.4 ms; the input perturbation moves that row by 34x
 # less: the two orders round the contact force's derivative differently, not the input).
 # What the test is for: decided separately, the modes differentiated different step
 # sequences and differed by 1-3 % (before replayed steps). The steps are decided once here,
