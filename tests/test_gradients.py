@@ -166,7 +166,7 @@ def test_impact_adaptive_steps_replayed_match_central_differences():
 # of ~90 ulp, the scale of the round-off the two orders accumulate), and no tighter than
 # MODES_AGREE_FLOOR, 5x the largest difference measured where the derivative is well
 # conditioned (AVX-512's 2.1e-9 at 2.4 ms; the input perturbation moves that row by 34x
-# less: the two orders round the contact force's derivative differently, not the input).
+# less: there the two orders' own rounding dominates, not the input's).
 # What the test is for: decided separately, the modes differentiated different step
 # sequences and differed by 1-3 % (before replayed steps). The steps are decided once here,
 # by `replayed_step_times`, and given to every program as data: `parameter_jacobian`'s own
