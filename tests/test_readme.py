@@ -31,6 +31,7 @@ BIN = os.path.dirname(sys.executable)
 NOT_RUN = {
     "make test": "the test suite itself (this test is part of it); CI runs it",
     "make test-fast": "the quick test suite, this test included",
+    "make test-isa ISA=AVX2": "the whole suite again, compiled for another instruction set",
     "source .venv/bin/activate": "the test puts the environment's bin first on PATH",
 }
 
