@@ -129,9 +129,15 @@ def test_a_case_gets_the_energy_verdict_simulate_gives_the_same_run(swept, tmp_p
 
 
 def test_a_ten_thousand_case_sweep_is_timed_before_its_first_chunk(tmp_path, monkeypatch):
-    """Refused after the probe (the limit lowered to 1 s: the probe's measurement is of this
+    """Refused after the probe (the limit lowered to 0.1 s: the probe's measurement is of this
     machine), before any chunk: nothing is left in the folder's place. The scene's rate is
-    taken out of the table, which would refuse it before compiling at that limit."""
+    taken out of the table, which would refuse it before compiling at that limit.
+
+    The threshold below which a sweep is not even announced (`PROGRESS_BAR_S`, 30 s) is
+    lowered with it: the probe returns quietly under it, so with only the limit lowered to
+    1 s the test passed only where the estimate exceeded 30 s. On a quiet AVX-512 machine the
+    probe measured 0.4 ms per one-case chunk, ~4 s for the 10,000 with their summaries, and
+    the sweep started its chunks. At 0.1 s the estimate has a margin of ~40x."""
     import jaxdeploy.sweep as library
     from jaxdeploy.commands import simulate
 
@@ -139,7 +145,8 @@ def test_a_ten_thousand_case_sweep_is_timed_before_its_first_chunk(tmp_path, mon
         raise AssertionError("a chunk ran before the estimate")
 
     monkeypatch.setattr(library, "_run_chunk", no_chunk)
-    monkeypatch.setattr(simulate, "LONG_RUN_S", 1.0)
+    monkeypatch.setattr(simulate, "LONG_RUN_S", 0.1)
+    monkeypatch.setattr(simulate, "PROGRESS_BAR_S", 0.05)
     monkeypatch.delitem(simulate.INTEGRATE_S_PER_SIMULATED_S, "pendulum")
     code, _, err = _command(["sweep", *ARGV[:2], "--t-end", "0.1", "--n-save", "11",
                              "--grid", "length=1:2:10000", "--chunk-size", "1",
