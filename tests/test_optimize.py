@@ -283,6 +283,7 @@ def test_design_problem_batch_equals_single_runs():
         value, parts, ok = problem.evaluate({"panel2_ra": ra})
         assert bool(ok)
         assert batch["objective"][i] == pytest.approx(float(value), rel=0, abs=BATCH_SINGLE_ATOL)
+        # J = Σ ln(part): an absolute error of J is a relative error of its parts.
         for label, part in parts.items():
             assert batch["parts"][label][i] == pytest.approx(float(part), rel=BATCH_SINGLE_ATOL)
 
