@@ -300,3 +300,29 @@ def test_a_command_called_from_python_leaves_the_program_cache_as_it_found_it(
     before = _program_cache.folder()
     assert main(["scenes"]) == 0
     assert _program_cache.folder() == before
+
+
+def test_the_energy_meters_initial_state_is_a_stored_program(store):
+    """`jaxdeploy simulate` initialises the energy meter of a metered mechanism through the
+    store (commands/simulate.py `_metered`): run operation by operation it cost a warm
+    deploy_array run 0.9 s of tracing and dispatch. A second process reads the program back
+    and gets the same state as the operations give (the pendulum's, bit for bit)."""
+    from jaxdeploy.commands import simulate as command
+    from jaxdeploy.mechanism import balance_metered, balance_metered_state
+    from jaxdeploy.scenes import get_scene
+
+    scene = get_scene("pendulum")
+    params = scene.resolve_params({})
+    mechanism = scene.build(params)
+    initial = scene.initial_state(params, mechanism)  # its assembly is stored too
+    before = len(_entries(store))
+    first = command._metered(mechanism, initial)
+    assert first.metered is not None and len(_entries(store)) == before + 1
+    _program_cache._loaded.clear()  # as in a new process: read from the disk
+    _program_cache._compiled.clear()
+    again = command._metered(mechanism, initial)
+    assert len(_entries(store)) == before + 1
+    expected = balance_metered_state(balance_metered(mechanism), initial)
+    for run in (first, again):
+        for got, want in zip(jax.tree.leaves(run.initial), jax.tree.leaves(expected), strict=True):
+            np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
