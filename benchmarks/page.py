@@ -548,6 +548,17 @@ def whole_process_targets(w: dict) -> list[str]:
                 f"CPU {sc[f'{run}_cpu_ratio']:.1f}×) | ≤ {goal:g}× | "
                 f"{_verdict(sc[f'{run}_ratio'], goal)} |"
             )
+    sw = w.get("sweep")
+    if sw:
+        for run, what in (("first", "empty caches"), ("second", "caches filled")):
+            one, default = sw["one device"][run], sw["default"][run]
+            lines.append(
+                f"| `jaxdeploy sweep` (16 deploy_array cases, 0.6 s), {what}: `--devices 1` / "
+                f"default ({default['devices']} devices), whole process | "
+                f"{sw[f'{run}_speedup']:.2f}× ({one['wall_s']:.1f} s / {default['wall_s']:.1f} s;"
+                f" the chunk alone {sw[f'{run}_chunk_speedup']:.2f}×: {one['chunk_wall_s']:.1f} s"
+                f" / {default['chunk_wall_s']:.1f} s) | (reference: every core by default) | – |"
+            )
     py = w.get("python_script")
     if py:
         second = py["second"]
@@ -632,6 +643,28 @@ def whole_process_section(w: dict) -> list[str]:
                 f"| {run} | {r['import_s']:.2f} | {r['first_result_s']:.2f} | "
                 f"{r['first_result_cpu_s']:.2f} | {r['wall_s']:.2f} | {r['cpu_s']:.2f} |"
             )
+        lines.append("")
+    sw = w.get("sweep")
+    if sw:
+        lines += [
+            f"`{sw['command']}`: a sweep's chunk is sharded over one JAX CPU device per usable "
+            f"core by default ({sw['cores']} here; `--devices N` chooses), the shards running "
+            "side by side; against `--devices 1`, each twice in new processes (empty caches, "
+            "then the caches the first filled). The chunk's wall time is from the sweep's "
+            "manifest; the rest of the process is start-up, the run-length probe (which "
+            "traces the chunk's program: a sweep's programs are not in the program cache) and "
+            "the files.",
+            "",
+            "| devices | run | whole process wall [s] | CPU [s] | the chunk [s] |",
+            "|---|---|---|---|---|",
+        ]
+        for name in ("one device", "default"):
+            for run in ("first", "second"):
+                r = sw[name][run]
+                lines.append(
+                    f"| {r['devices']} ({name}) | {run} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} "
+                    f"| {r['chunk_wall_s']:.1f} |"
+                )
         lines.append("")
     return lines
 

@@ -11,6 +11,8 @@ whole-process`): interpreter start, imports, build, compile or cache load, solve
 * A Python script (README's "Python" example: `jd.enable_caches(...)`, the slider-crank with
   clearance 1e-4 m, Tsit5 at rtol 1e-8) run twice in new processes with one cache folder: the
   wall and CPU time from the end of `import jaxdeploy` to its first `simulate` result.
+* `jaxdeploy sweep` of 16 deploy_array cases on its default devices (one per usable core)
+  against `--devices 1`, each with empty and then filled caches (`sweep_on_every_core`).
 
 Wall time from the parent (`time.perf_counter` around the child), CPU time of the child's
 process tree (`RUSAGE_CHILDREN`, user + system, which other jobs' load does not inflate).
@@ -157,8 +159,48 @@ def python_script_second_process() -> dict:
     return out
 
 
+# A sweep as a design study starts one: 16 cases of deploy_array over the first 0.6 s (the
+# unfolding and the lock), one chunk.
+SWEEP = ("sweep", "--scene", "deploy_array", "--grid", "spring_stiffness=1.2:1.8:16",
+         "--t-end", "0.6", "--quiet", "--long-run")  # fmt: skip
+
+
+def sweep_on_every_core() -> dict:
+    """`jaxdeploy sweep` (`SWEEP`) with its default devices (one per usable core) against
+    `--devices 1`, each twice in new processes: first with empty caches, then with the
+    caches the first filled. Wall and CPU time of each process, and the chunk's own wall
+    time from its manifest (the sharded vmapped program alone)."""
+    from jaxdeploy.commands.sweep import usable_cores
+
+    out = {"command": "jaxdeploy " + " ".join(SWEEP), "cores": usable_cores()}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, extra in (("one device", ("--devices", "1")), ("default", ())):
+            env = _environment(os.path.join(tmp, name.replace(" ", "_") + "_cache"))
+            runs = {}
+            for run in ("first", "second"):
+                folder = os.path.join(tmp, f"{name.replace(' ', '_')}_{run}")
+                command = [sys.executable, "-m", "jaxdeploy.cli", *SWEEP, "--out", folder,
+                           *extra]  # fmt: skip
+                done = _run(command, env)
+                with open(os.path.join(folder, "manifest.json"), encoding="utf-8") as f:
+                    manifest = json.load(f)
+                runs[run] = {
+                    "wall_s": done["wall_s"],
+                    "cpu_s": done["cpu_s"],
+                    "devices": len(manifest["devices"]),
+                    "chunk_wall_s": sum(c["wall_time_s"] for c in manifest["chunks"]),
+                }
+            out[name] = runs
+    for run in ("first", "second"):
+        one, default = out["one device"][run], out["default"][run]
+        out[f"{run}_speedup"] = one["wall_s"] / default["wall_s"]
+        out[f"{run}_chunk_speedup"] = one["chunk_wall_s"] / default["chunk_wall_s"]
+    return out
+
+
 def measure(root: str = ".") -> dict:
     return {
         "slider_crank": slider_crank_vs_script(root),
         "python_script": python_script_second_process(),
+        "sweep": sweep_on_every_core(),
     }

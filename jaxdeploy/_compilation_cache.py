@@ -205,8 +205,20 @@ def _read_ahead_for_script() -> None:
     from . import _read_ahead
 
     script = sys.argv[0] if sys.argv else ""
-    if script and os.path.isfile(script):
+    if script and os.path.isfile(script) and not _is_command_line(script):
         _read_ahead.start("python " + os.path.abspath(script))
+
+
+def _is_command_line(script: str) -> bool:
+    """Whether `script` is the `jaxdeploy` command (its console script, or `python -m
+    jaxdeploy.cli`), which `JAXDEPLOY_CACHE_DIR` also reaches on import. Its commands read
+    ahead their own programs under their own names (`jaxdeploy simulate`); one name for every
+    command would read a simulate's programs into a sweep, and the reading starts JAX's backend
+    before `jaxdeploy sweep` can choose its devices."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    return os.path.basename(script) in ("jaxdeploy", "jaxdeploy.exe") or os.path.abspath(
+        script
+    ) == os.path.join(here, "cli.py")
 
 
 def _heal_damaged_entries() -> None:

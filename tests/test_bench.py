@@ -527,3 +527,31 @@ def test_whole_process_rows_render_first_and_second_runs():
     assert "| second | 3.00 | 4.00 | 1.00 | 1.00 | 3.0× |" in section
     assert "start_up 1.00 / 1.50; build 0.50 / –; compile 6.00 / –" in section
     assert "| second | 0.50 | 0.80 | 0.90 | 2.50 | 2.60 |" in section
+
+
+def test_sweep_rows_render_both_device_counts():
+    """The sweep's rows (issue 32, batch on every core): the default devices against
+    `--devices 1`, whole process and the chunk alone, and the section's table."""
+    from benchmarks import page
+
+    def run(wall, chunk, devices):
+        return dict(wall_s=wall, cpu_s=wall + 1.0, chunk_wall_s=chunk, devices=devices)
+
+    w = {
+        "sweep": {
+            "command": "jaxdeploy sweep --scene deploy_array",
+            "cores": 2,
+            "one device": {"first": run(50.0, 15.0, 1), "second": run(30.0, 14.0, 1)},
+            "default": {"first": run(40.0, 10.0, 2), "second": run(20.0, 7.0, 2)},
+            "first_speedup": 1.25,
+            "first_chunk_speedup": 1.5,
+            "second_speedup": 1.5,
+            "second_chunk_speedup": 2.0,
+        }
+    }
+    rows = "\n".join(page.whole_process_targets(w))
+    assert "caches filled: `--devices 1` / default (2 devices), whole process | 1.50× " in rows
+    assert "(30.0 s / 20.0 s; the chunk alone 2.00×: 14.0 s / 7.0 s)" in rows
+    section = "\n".join(page.whole_process_section(w))
+    assert "| 2 (default) | second | 20.0 | 21.0 | 7.0 |" in section
+    assert "| 1 (one device) | first | 50.0 | 51.0 | 15.0 |" in section

@@ -200,3 +200,71 @@ def test_sweep_cli_refuses_a_bad_policy(tmp_path):
     code = main(["sweep", "--scene", "pendulum", "--grid", "length=1,2", "--out", str(out),
                  "--policy", "groups:x", "--quiet"])  # fmt: skip
     assert code == 2 and not out.exists()
+
+
+def test_a_sweep_uses_one_device_per_core_unless_told(tmp_path):
+    """`jaxdeploy sweep` splits the CPU into one JAX device per usable core before JAX starts
+    (chunks run their shards side by side); `--devices N` chooses the count, and a resumed
+    sweep keeps the count it was started with (its later chunks are batched as its earlier
+    ones were). The environment's own setting is left alone."""
+    from jaxdeploy.commands.sweep import usable_cores
+
+    env = _env(tmp_path / "cache")
+    del env["XLA_FLAGS"]  # the environment does not fix the device count here
+    env.pop("JAX_NUM_CPU_DEVICES", None)
+    small = ["--grid", "initial_angle=0.0,0.3", "--t-end", "0.05", "--n-save", "5", "--quiet"]
+
+    def sweep(out, *extra):
+        command = [sys.executable, "-m", "jaxdeploy.cli", "sweep", "--scene", "pendulum"]
+        done = subprocess.run(
+            [*command, *small, "--out", str(out), *extra],
+            env=env, capture_output=True, text=True, timeout=600,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        return json.loads((out / "manifest.json").read_text())["devices"]
+
+    assert len(sweep(tmp_path / "default")) == usable_cores()
+    assert len(sweep(tmp_path / "one", "--devices", "1")) == 1
+
+    from jaxdeploy.commands.sweep import _resumed_devices
+
+    assert _resumed_devices(str(tmp_path / "one")) == 1
+    assert _resumed_devices(str(tmp_path / "missing")) is None
+
+
+@pytest.mark.parametrize(
+    ("extra", "environment", "message"),
+    [
+        (["--devices", "0"], {}, "--devices = 0 is invalid: it must be ≥ 1"),
+        (["--devices", "2", "--distributed"], {}, "--devices does not apply with --distributed"),
+        (
+            ["--devices", "2"],
+            {"XLA_FLAGS": "--xla_force_host_platform_device_count=3"},
+            "XLA_FLAGS=--xla_force_host_platform_device_count already sets",
+        ),
+    ],
+)
+def test_a_device_count_that_cannot_hold_is_refused(
+    tmp_path, capsys, monkeypatch, extra, environment, message
+):
+    from jaxdeploy.cli import main
+
+    for name, value in environment.items():
+        monkeypatch.setenv(name, value)
+    code = main(["sweep", "--scene", "pendulum", "--out", str(tmp_path / "s"), *extra])
+    assert code == 2 and message in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()
+
+
+def test_devices_asked_for_after_jax_started_are_refused(tmp_path, capsys):
+    """In a process where JAX already runs (a script, these tests) the device count is fixed:
+    an explicit --devices that differs is refused, naming the count it has."""
+    import jax
+
+    from jaxdeploy.cli import main
+
+    other = jax.device_count() + 1
+    code = main(["sweep", "--scene", "pendulum", "--out", str(tmp_path / "s"),
+                 "--devices", str(other)])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and f"JAX already runs in this process with {jax.device_count()}" in err
