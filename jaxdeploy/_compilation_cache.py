@@ -216,9 +216,8 @@ def _is_command_line(script: str) -> bool:
     command would read a simulate's programs into a sweep, and the reading starts JAX's backend
     before `jaxdeploy sweep` can choose its devices."""
     here = os.path.dirname(os.path.abspath(__file__))
-    return os.path.basename(script) in ("jaxdeploy", "jaxdeploy.exe") or os.path.abspath(
-        script
-    ) == os.path.join(here, "cli.py")
+    name = os.path.splitext(os.path.basename(script))[0]  # the console script, any platform
+    return name == "jaxdeploy" or os.path.abspath(script) == os.path.join(here, "cli.py")
 
 
 def _heal_damaged_entries() -> None:

@@ -6,7 +6,7 @@ to decide which parts of its state are static (`diffrax/_integrate.py`, `loop`).
 is compiled into every program whether the run uses it or not. For slider_crank's Tsit5
 program XLA compiles 9553 operations, of which 1500 are diffrax's end-time threshold alone
 (t₁ − 100 ULP, 100 chained `nextafter`), and 4351 its loop machinery (docs/performance.md,
-"What XLA compiles"). This module is the loop those runs need and nothing more:
+its table of what XLA compiles). This module is the loop those runs need and nothing more:
 
 * forward time t₀ < t₁, one `MechanismTerm`, one solver (`TrackExtremes` around a mechanism
   solver) and one step-size controller (`prepare`'s: `stop_at_non_finite` around PID,
