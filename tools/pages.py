@@ -11,6 +11,16 @@ must run, with the cost measured on this project's 2-core machine.
     python -m tools.pages --quick         # only those under QUICK_MINUTES each
     python -m tools.pages --only restitution_table extremes_sampling
     python -m tools.pages --list          # what would run, its cost, and why it is stale
+    python -m tools.pages --jobs 2        # two at a time where they share no page
+
+With `--jobs N` up to N generators run at once (`schedule`): one whose pages another writes
+waits for it (the list's order is kept among them: verify_mechanics writes verification.md
+whole before independent_report writes its block, identification.py measures what
+identification_landscape.py reads), and one that times the machine (`alone`: `make bench`)
+runs with nothing beside it, the generators after it waiting. Most generators keep about one
+core busy (their CPU and wall minutes below), so on two cores two at a time take about half
+the wall time; each one's output then goes to a log file, and its CPU time is its own
+(`os.wait4`).
 
 A generator refuses a dirty tree (changes outside docs/ and README.md): commit first. A
 generator that exits non-zero (a fit that misses its criterion writes its page and says so)
@@ -44,6 +54,7 @@ class Generator:
     measured: str  # CPU or wall, the load, and the run it comes from
     cwd: str = "."  # relative to the checkout
     results: str = ""  # a folder of stored runs it reuses: moved aside first (--keep-results)
+    alone: bool = False  # it times the machine: nothing runs beside it (--jobs)
 
 
 PY = sys.executable
@@ -60,7 +71,7 @@ GENERATORS = (
     Generator("bench", (PY, "-m", "benchmarks", "all"),
               ("docs/performance.md", "README.md"), 11.5,
               "wall, load 1.0-1.6, at 79fefb3 (9.7 min + 1.8 min tour); make bench's pages: "
-              "docs/bench/, the README's tour times"),
+              "docs/bench/, the README's tour times", alone=True),
     Generator("verify_mechanics", (PY, "tests/verify_mechanics.py"), ("docs/verification.md",),
               3.4, "CPU, today (203 s; 14 min wall at load 25-29; 306 s wall at load 9 in "
               "3514e25)"),
@@ -165,10 +176,109 @@ def run(generator: Generator) -> int:
     done = subprocess.run(generator.argv, cwd=os.path.join(ROOT, generator.cwd), env=env)
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime) / 60
-    print(f"[pages] {generator.name}: exit {done.returncode}, {cpu:.1f} CPU-min, "
-          f"{(time.perf_counter() - start) / 60:.1f} min wall, load "
-          f"{os.getloadavg()[0]:.1f}", flush=True)  # fmt: skip
+    _report(generator, done.returncode, 60 * cpu, time.perf_counter() - start)
     return done.returncode
+
+
+def _report(generator: Generator, code: int, cpu_s: float, wall_s: float) -> None:
+    print(f"[pages] {generator.name}: exit {code}, {cpu_s / 60:.1f} CPU-min, "
+          f"{wall_s / 60:.1f} min wall, load {os.getloadavg()[0]:.1f}", flush=True)  # fmt: skip
+
+
+def _pages_of(generator: Generator) -> set[str]:
+    return {split(spec)[0] for spec in generator.pages}
+
+
+def ready(chosen, index: int, running: set[int], finished: set[int]) -> bool:
+    """Whether generator `chosen[index]` may start now (`--jobs`): every earlier one that
+    writes one of its pages, and every earlier `alone` one, has finished; an `alone` one
+    starts only when nothing runs; nothing starts beside a running `alone` one."""
+    g = chosen[index]
+    if any(chosen[i].alone for i in running):
+        return False
+    if g.alone and running:
+        return False
+    for i in range(index):
+        if i in finished:
+            continue
+        if chosen[i].alone or _pages_of(chosen[i]) & _pages_of(g):
+            return False
+    return True
+
+
+def schedule(chosen, jobs: int, start, wait) -> list[str]:
+    """Run the generators `chosen`, up to `jobs` at once where `ready` allows, in the list's
+    order otherwise; `start(generator)` starts one and returns a handle, `wait(handles)`
+    blocks until one of them ends and returns `(handle, exit status)`. Returns the names of
+    those that exited non-zero."""
+    pending, running, finished, failed = list(range(len(chosen))), {}, set(), []
+    while pending or running:
+        for index in list(pending):
+            if len(running) >= jobs:
+                break
+            if ready(chosen, index, set(running), finished):
+                pending.remove(index)
+                running[index] = start(chosen[index])
+        if not running:  # nothing could start: a bug in `ready`, not a wait for ever
+            raise RuntimeError(f"no generator can start: {[chosen[i].name for i in pending]}")
+        handle, code = wait(list(running.values()))
+        index = next(i for i, h in running.items() if h is handle)
+        del running[index]
+        finished.add(index)
+        if code != 0:
+            failed.append(chosen[index].name)
+    return failed
+
+
+class _Child:
+    """A generator running as a child process, its output in `log`."""
+
+    def __init__(self, generator: Generator, log_dir: str):
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [ROOT, os.environ.get(
+            "PYTHONPATH")]))}  # fmt: skip
+        self.generator = generator
+        self.log = os.path.join(log_dir, f"{generator.name}.log")
+        self.began = time.perf_counter()
+        with open(self.log, "w", encoding="utf-8") as out:
+            self.process = subprocess.Popen(
+                generator.argv, cwd=os.path.join(ROOT, generator.cwd), env=env, stdout=out,
+                stderr=subprocess.STDOUT,
+            )  # fmt: skip
+        print(f"[pages] {generator.name}: started (log {os.path.relpath(self.log, ROOT)})",
+              flush=True)  # fmt: skip
+
+
+def _wait_any(children: list[_Child]) -> tuple[_Child, int]:
+    """The first of `children` to end, its exit status, and its own CPU time reported
+    (`os.wait4`: the child's and its descendants' rusage, not the other children's)."""
+    while True:
+        # Each of ours by its pid (not any child: a process may have others, whose owners
+        # would lose them), a tenth of a second apart: generators run for minutes.
+        for child in children:
+            pid, status, usage = os.wait4(child.process.pid, os.WNOHANG)
+            if pid == 0:
+                continue
+            code = os.waitstatus_to_exitcode(status)
+            child.process.returncode = code
+            cpu = usage.ru_utime + usage.ru_stime
+            _report(child.generator, code, cpu, time.perf_counter() - child.began)
+            if code != 0:
+                print(f"[pages] {child.generator.name}: see {child.log}", flush=True)
+            return child, code
+        time.sleep(0.1)
+
+
+def run_parallel(chosen, jobs: int, keep_results: bool) -> list[str]:
+    """`schedule` with child processes, their output in results/pages-logs/."""
+    log_dir = os.path.join(ROOT, "results", "pages-logs")
+    os.makedirs(log_dir, exist_ok=True)
+
+    def start(generator):
+        if generator.results and not keep_results:
+            move_aside(generator.results)
+        return _Child(generator, log_dir)
+
+    return schedule(chosen, jobs, start, _wait_any)
 
 
 def select(only=(), quick=False, stale_only=False):
@@ -193,7 +303,12 @@ def main(argv=None) -> int:
         help="let the long studies reuse their stored runs (recorded as runs_at)",
     )
     ap.add_argument("--list", action="store_true", help="list (with why stale) and stop")
+    ap.add_argument("--jobs", type=int, default=1, metavar="N",
+                    help="run up to N generators at once where they share no page (default 1; "
+                         "`make bench` always alone)")  # fmt: skip
     args = ap.parse_args(argv)
+    if args.jobs < 1:
+        ap.error(f"--jobs {args.jobs} is invalid: it must be ≥ 1")
     chosen = select(args.only, args.quick, args.stale)
     total = sum(g.minutes for g in chosen)
     print(f"[pages] {len(chosen)} generators, about {total:.0f} min measured", flush=True)
@@ -203,6 +318,11 @@ def main(argv=None) -> int:
               + ("stale: " + "; ".join(why) if why else "fresh"))  # fmt: skip
     if args.list:
         return 0
+    if args.jobs > 1:
+        failed = run_parallel(chosen, args.jobs, args.keep_results)
+        if failed:
+            print(f"[pages] exited non-zero (their pages say why): {', '.join(failed)}")
+        return 1 if failed else 0
     failed = []
     for g in chosen:
         if g.results and not args.keep_results:
