@@ -9,8 +9,10 @@ horizon; the lock is at 0.54 s), saved at 10 kHz. Variants: the default reconstr
 c_e(Ra) = c_e^((Ra/1.6 µm)^p)); `lugre` (LuGre hinge friction, contact.LuGreContactFriction);
 and, on the roughness cases only, sweeps of the unknown parameters: p and the ploughing law's
 adhesion part μ_a (the region where a claim holds). Every variant is run at the scene's
-default tolerance and at a tenfold tighter one; the change of each number is its numerical
-uncertainty. The sensitivities (forward-mode derivatives, `--sensitivity-only`) are cached
+default tolerance and at a tenfold tighter one, and at the tight one again compiled for
+another instruction set (SSE4.2, in a second process beside the first: the same arithmetic
+rounded differently); the larger change of each number is its numerical uncertainty. The
+sensitivities (forward-mode derivatives, `--sensitivity-only`) are cached
 separately.
 
 Run from the repository root (nice'd; runs cached in results/paper_study/)::
@@ -26,6 +28,8 @@ import argparse
 import json
 import os
 import pickle
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -86,6 +90,15 @@ VARIANTS = {  # name: (scene options, fixed parameters, cases run)
 # Every variant at the default and at the tight tolerance, in order of priority (the
 # variants run in full first, then the sweeps of the unknown parameters).
 RUNS = [(v, tol) for v in VARIANTS for tol in ("default", "tight")]
+# ... and the tight run again with XLA compiling for another instruction set: the same
+# operations, rounded differently. After the lock the latch's impacts amplify round-off: the
+# page made on an AVX2 machine and the same code run on an AVX-512 one differed in post-lock
+# numbers by more than their tolerance error bars (panel 2's peak at Ra 0.8 µm 162 ± 0.2 Hz
+# against 176.4 ± 0.9 Hz), and six verdicts with them. That spread is part of each number's
+# uncertainty; SSE4.2 is a build every x86-64 machine of ours can run.
+ROUNDOFF, ROUNDOFF_ISA = "roundoff", "SSE4_2"
+ROUNDOFF_FLAG = f"--xla_cpu_max_isa={ROUNDOFF_ISA}"
+ROUNDOFF_RUNS = [(v, ROUNDOFF) for v in VARIANTS]
 
 
 def _stem(variant, tolerance):
@@ -103,15 +116,23 @@ def run(variant, tolerance, rerun=False):
     scene = DeployArray(**options)
     if path.exists() and not rerun:
         return scene, *pickle.loads(path.read_bytes())
+    if (tolerance == ROUNDOFF) != (ROUNDOFF_FLAG in os.environ.get("XLA_FLAGS", "")):
+        raise RuntimeError(
+            f"the {tolerance} run of {variant!r} needs XLA_FLAGS "
+            + ("with " if tolerance == ROUNDOFF else "without ")
+            + f"{ROUNDOFF_FLAG} (main() starts the round-off runs in a process of their own)"
+        )
     table = {f"{p}_{k}": [CASES[i][j] for i in cases] for p in ("panel1", "panel2")
              for j, k in enumerate(("ra", "clearance"))}  # fmt: skip
     start = time.perf_counter()
+    control = {} if tolerance == "default" else TIGHT
     batch = simulate_batch(scene, table, T_END, fixed=fixed, n_save=int(T_END * SAVE_RATE_HZ) + 1,
-                           control=TIGHT if tolerance == "tight" else None)  # fmt: skip
+                           control=control or None)  # fmt: skip
     jax.block_until_ready(batch.trajectory)
     info = {"wall_s": time.perf_counter() - start, "statuses": batch.statuses(),
             "steps": np.asarray(batch.trajectory.stats["num_accepted_steps"]).tolist(),
-            "control": str(scene.default_control.updated(TIGHT if tolerance == "tight" else {})),
+            "control": str(scene.default_control.updated(control)),
+            "xla_flags": os.environ.get("XLA_FLAGS", ""),
             "revision": code_revision(), "machine": machine_description()}  # fmt: skip
     print(f"[{variant}, {tolerance}] {info['wall_s']:.0f} s, {info['statuses']}", flush=True)
     params = [batch.case_params(i) for i in range(batch.size)]
@@ -163,17 +184,55 @@ def analysis(runs, rerun=False):
 
 def evidence(results):
     """Evidence per variant run at both tolerances: the tight run's values, uncertainties
-    |tight − default| of the variant's own runs."""
+    max(|tight − default|, |tight − round-off|) of the variant's own runs (the round-off
+    term where its run exists)."""
     ev = {}
     for v in VARIANTS:
         if (v, "tight") not in results or (v, "default") not in results:
             continue
         tight, loose = results[(v, "tight")], results[(v, "default")]
+        other = results.get((v, ROUNDOFF))
         values = [r and r[1] for r in tight]
-        unc = [r and {k: abs(x - loose[i][1][k]) for k, x in r[1].items()}
+        unc = [r and {k: max(abs(x - loose[i][1][k]),
+                             abs(x - other[i][1][k]) if other else 0.0)
+                      for k, x in r[1].items()}
                for i, r in enumerate(tight)]  # fmt: skip
         ev[v] = pc.Evidence(values, unc)
     return ev
+
+
+def roundoff_share(results) -> tuple[int, int]:
+    """Of the default variant's numbers (every metric of every case), how many have a
+    round-off term larger than the tolerance term, and how many there are."""
+    tight, loose = results[("default", "tight")], results[("default", "default")]
+    other = results.get(("default", ROUNDOFF))
+    if other is None:
+        return 0, 0
+    larger = total = 0
+    for i, r in enumerate(tight):
+        if r is None:
+            continue
+        for k, x in r[1].items():
+            a, b = abs(x - loose[i][1][k]), abs(x - other[i][1][k])
+            if np.isfinite(a) and np.isfinite(b):
+                total += 1
+                larger += b > a
+    return larger, total
+
+
+def start_roundoff_runs(rerun: bool):
+    """The round-off runs not cached yet (all with `rerun`), started in a second process
+    compiled for `ROUNDOFF_ISA` (XLA reads its flags once per process), to run beside this
+    one's: a vmapped batch keeps about one core busy. None when there is nothing to run."""
+    todo = [v for v in VARIANTS if v not in CUT and (rerun or not cached(v, ROUNDOFF))]
+    if not todo:
+        return None
+    flags = " ".join([os.environ.get("XLA_FLAGS", ""), ROUNDOFF_FLAG]).strip()
+    argv = [sys.executable, str(Path(__file__).resolve()), "--runs-only", "--roundoff",
+            "--variants", *todo, *(["--rerun"] if rerun else [])]  # fmt: skip
+    print(f"[round-off runs] {len(todo)} variants in a second process ({ROUNDOFF_FLAG})",
+          flush=True)  # fmt: skip
+    return subprocess.Popen(argv, env={**os.environ, "XLA_FLAGS": flags}, cwd=ROOT)
 
 
 # --- sensitivities: d(output)/d ln(parameter) by forward mode, checked by differences --------
@@ -348,7 +407,69 @@ def sensitivity_lines(sens):
         cells = [f"{sens['jacobian'][k][sens['params'].index(p)]:.4g} / {d[k]:.4g}"
                  for p, d in sens["central_difference"].items()]  # fmt: skip
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    return lines + ["", SENS_READING]
+    return lines + ["", sensitivity_reading(sens)]
+
+
+# A derivative "matches" its central difference within this relative amount, and is "far"
+# from it beyond this factor (either way).
+SENS_AGREE, SENS_FAR = 0.05, 10.0
+
+
+def _ratio(sens, output, param):
+    """jacfwd / central difference of `output` (an index of OUTPUTS) in `param`."""
+    jac = sens["jacobian"][output][sens["params"].index(param)]
+    cd = sens["central_difference"][param][output]
+    return jac / cd if cd != 0 else float("inf")
+
+
+def sensitivity_reading(sens) -> str:
+    """How to read the check, computed from the numbers (`SENS_AGREE`, `SENS_FAR`)."""
+    agree = f"{100 * SENS_AGREE:g} %"
+    lock, lock_c = _ratio(sens, 0, "spring stiffness"), _ratio(sens, 0, "clearance")
+    jac_c = sens["jacobian"][0][sens["params"].index("clearance")]
+    cd_c = sens["central_difference"]["clearance"][0]
+    spring = [_ratio(sens, k, "spring stiffness") for k in (1, 2)]
+    clearance = [_ratio(sens, k, "clearance") for k in (1, 2)]
+    post = [abs(_ratio(sens, k, p)) for k in (3, 4, 5) for p in CD_PARAMS]
+    near = [
+        f"{OUTPUTS[k]} in the {p} ({_ratio(sens, k, p):.3g}×)"
+        for k in (3, 4, 5)
+        for p in CD_PARAMS
+        if abs(_ratio(sens, k, p)) < SENS_FAR
+    ]
+    far = [x for x in post if x >= SENS_FAR]
+    if abs(lock - 1) <= SENS_AGREE:
+        spring_text = f", within {agree}: a smooth function of the parameters there. "
+    else:
+        spring_text = f", off by more than {agree}. "
+    if abs(lock_c - 1) <= SENS_AGREE:
+        clearance_text = f"In the clearance it matches as well ({lock_c:.4g}×). "
+    else:
+        clearance_text = (
+            f"In the clearance it is {jac_c:.3g} s against a difference of {cd_c:.3g} s: the "
+            "difference spans impacts during the unfolding, whose times move with the "
+            "clearance, which the pathwise derivative of one trajectory does not see. "
+        )
+    post_text = (
+        f"Of the post-lock outputs' {len(post)} derivatives, {len(far)} are {SENS_FAR:g} or "
+        "more times their differences"
+        + (f" (up to {max(far):.2g}×)" if far else "")
+        + (f"; the others: {', '.join(near)}. " if near else ". ")
+    )
+    return (
+        "How to read the check (computed from the tables above): the lock time's forward-mode "
+        f"derivative in the spring stiffness is {lock:.4g} times its central difference"
+        + spring_text
+        + clearance_text
+        + f"The unfolding deviations' derivatives are {spring[0]:.3g}× and {spring[1]:.3g}× "
+        f"their differences in the spring stiffness, {clearance[0]:.3g}× and "
+        f"{clearance[1]:.3g}× in the clearance (a negative factor: the other sign). "
+        + post_text
+        + "They are derivatives of one trajectory whose impact times move with every parameter "
+        "(the optimize module's docstring measures such derivatives up to 1e15 with adaptive "
+        "steps); the differences over a 1 % step are the trend a designer can use, and of the "
+        "Jacobian only the columns whose check matches are."
+    )
 
 
 def _control(text):
@@ -415,6 +536,8 @@ def write_page(runs, results, sens, record):
     figures = [figure_cases(results), figure_region(table, region_variants)]
     info = {k: r[3] for k, r in runs.items()}
     stored = [i["revision"] for i in info.values() if i.get("revision")]
+    if sens and sens.get("revision"):  # the sensitivities are numbers of this page too
+        stored.append(sens["revision"])
     record["runs_at"] = sorted({r["commit"] for r in stored} - {record["commit"]})
     record["dirty"] = record["dirty"] or any(r["dirty"] for r in stored)
     lines = [
@@ -427,14 +550,17 @@ def write_page(runs, results, sens, record):
         "| variant | control | cases | accepted steps per case | wall [s] | load avg. | statuses |",
         "|---|---|---|---|---|---|---|",
     ]  # fmt: skip
-    for (v, _), i in info.items():
+    for (v, tolerance), i in info.items():
+        build = f", {ROUNDOFF_ISA.replace('_', '.')} build" if tolerance == ROUNDOFF else ""
         lines.append(
-            f"| {v} | {_control(i['control'])} | {len(i['steps'])} | {i['steps']} | "
+            f"| {v} | {_control(i['control'])}{build} | {len(i['steps'])} | {i['steps']} | "
             f"{i['wall_s']:.0f} | {_load(i['machine'])} | {sorted(set(i['statuses']))} |"
         )
     for v, why in CUT.items():
         lines.append(f"| {v} | not run | | | | | {why} |")
-    lines += ["", RUNS_TEXT.format(code=code_bullets(info, sens)), "",
+    larger, total = roundoff_share(results)
+    lines += ["", RUNS_TEXT.format(code=code_bullets(info, sens), isa=ROUNDOFF_ISA.replace(
+              "_", "."), larger=larger, total=total), "",
               "## Our numbers (default variant)", "",
               "| quantity | " + " | ".join(CASE_NAMES) + " |", "|---|" + "---|" * 5]  # fmt: skip
     for name, metric, scale in METRIC_ROWS:
@@ -512,10 +638,15 @@ variants say how roughness and friction act ([contact.md](contact.md)):
 RUNS_TEXT = """\
 * 2 s per case, the paper's horizon: the lock is at 0.54 s, so 1.46 s after it; "once
   stable" is the last 0.2 s.
-* Tsit5 with the scene's default control (rtol 1e-6, atol 1e-9, dt_max 0.5 ms), and every
-  variant again at rtol 1e-7, atol 1e-10. **Uncertainty**: every number is the tight run's,
-  ± its change from the default tolerance (each variant its own); a comparison counts only
-  when the difference exceeds the summed error bars (≈ otherwise).
+* Tsit5 with the scene's default control (rtol 1e-6, atol 1e-9, dt_max 0.5 ms), every
+  variant again at rtol 1e-7, atol 1e-10, and that tight run once more with XLA compiling for
+  {isa} (`--xla_cpu_max_isa`, a second process: the same operations rounded differently).
+  **Uncertainty**: every number is the tight run's, ± the larger of its change from the
+  default tolerance and its change under the other build's round-off (each variant its own;
+  the round-off term is the larger for {larger} of the default variant's {total} numbers: after
+  the lock the latch's impacts amplify round-off, and a machine with another instruction set
+  computes another of these trajectories); a comparison counts only when the difference
+  exceeds the summed error bars (≈ otherwise).
 {code}
 * Spectra: Welch (0.1 s Hann segments, half overlapping) of the interval-mean Y acceleration
   of each panel's centre after lock (docs/spectral_peak.md); peak frequency refined by a
@@ -583,16 +714,6 @@ six tangents through two simulations, and central differences) and caches them i
 that file is removed). When last measured, the Jacobian took 3394 s wall for the 1 s horizon
 at load 5–11. The last table (1 s, default variant) was made with older code, at commit
 51bc15d: `git show 51bc15d:docs/paper_study.md`."""
-SENS_READING = """\
-How to read the check: the lock time is a smooth function of the parameters, and its
-forward-mode derivative in the spring stiffness matches the difference. Everything that
-passes through hinge impacts does not: the unfolding deviations match in the spring stiffness
-to 20–30 % but not in the clearance, and the post-lock outputs' pathwise derivatives are
-orders of magnitude above their differences. They are derivatives of one trajectory whose
-impact times move with every parameter (the optimize module's docstring measures such
-derivatives up to 1e15 with adaptive steps); the differences over a 1 % step are the trend a
-designer can use, and the Jacobian columns other than the lock time's are not."""
-
 # Written for the verdicts at the commit on top of the page; a changed verdict makes the
 # script say so here instead of keeping a cause it no longer shows.
 CAUSES_WRITTEN_FOR = (  # default/ploughing/restitution p=1/lugre verdicts per claim
@@ -939,17 +1060,28 @@ def main(argv=None) -> int:
                         help="with --runs-only: run these variants only")  # fmt: skip
     parser.add_argument("--sensitivity-only", action="store_true", help="the derivatives only")
     parser.add_argument("--skip-sensitivity", action="store_true", help="page without them")
+    parser.add_argument(
+        "--roundoff",
+        action="store_true",
+        help=f"with --runs-only: the round-off runs (XLA_FLAGS={ROUNDOFF_FLAG})",
+    )
     args = parser.parse_args(argv)
     if args.sensitivity_only:
         print(json.dumps(sensitivities(), indent=1))
         return 0
     if args.runs_only:
-        for key in RUNS:
+        for key in ROUNDOFF_RUNS if args.roundoff else RUNS:
             if key[0] not in CUT and (args.variants is None or key[0] in args.variants):
                 run(*key, rerun=args.rerun)
         return 0
     record = pages.start(MEASURES, "python experiments/paper_study.py --rerun")
-    runs = {key: run(*key, rerun=args.rerun) for key in RUNS if key[0] not in CUT}
+    beside = start_roundoff_runs(args.rerun)
+    try:
+        runs = {key: run(*key, rerun=args.rerun) for key in RUNS if key[0] not in CUT}
+    finally:
+        if beside is not None and beside.wait() != 0:
+            raise SystemExit(f"the round-off runs failed (exit {beside.returncode})")
+    runs.update({key: run(*key) for key in ROUNDOFF_RUNS if key[0] not in CUT})
     results = analysis(runs, rerun=args.rerun)
     sens = (
         None
