@@ -132,10 +132,10 @@ GENERATORS = (
               20.0, "wall, load 6-7, at f663278: grids 800 s + the optimisation",
               results="results/design_study"),
     Generator("paper_study", (PY, "experiments/paper_study.py", "--rerun"),
-              ("docs/paper_study.md",), 31.5,
-              "CPU, load 2-4, at 847ace3 (38.9 min wall): the 24 runs and their analysis; "
-              "--rerun does not recompute the sensitivities (--sensitivity-only: 3394 s wall "
-              "at load 5-11, page)"),
+              ("docs/paper_study.md",), 18.0,
+              "CPU, load 1-2, at 430a822 (9.7 min wall; its round-off runs in a second "
+              "process beside): the 27 runs and their analysis; --rerun does not recompute "
+              "the sensitivities (--sensitivity-only, before it: 74 s wall at 430a822)"),
 )  # fmt: skip
 
 
