@@ -245,17 +245,21 @@ def usable_cores() -> int:
 def _host_devices(args) -> str | None:
     """Split the CPU into `--devices` JAX devices (default: one per usable core; for
     --resume, the count the sweep in --out was started with), so that each chunk's shards run
-    side by side: on a 2-core machine one vmapped chunk of 16 deploy_array cases over 0.6 s
-    took 13.4 s on one device and 5.6 s on two (commit message of this change). JAX reads the
-    count when its backend starts (`jax_num_cpu_devices`), so only a process that has not run
-    JAX yet can choose it: the command line. Called from Python after JAX started, or where
-    the environment already fixes the count (`XLA_FLAGS=--xla_force_host_platform_device_
-    count`, `JAX_NUM_CPU_DEVICES`) or with --distributed, the devices are left as they are,
-    and an explicit --devices that they contradict is refused (the message names why)."""
+    side by side (what that gains: docs/performance.md, "Whole processes", by `make bench`).
+    JAX reads the count when its backend starts (`jax_num_cpu_devices`), so only a process
+    that has not run JAX yet can choose it. Where the environment already fixes the count
+    (`XLA_FLAGS=--xla_force_host_platform_device_count`, `JAX_NUM_CPU_DEVICES`), with
+    --distributed, or after JAX started, the devices are left as they are, and an explicit
+    --devices that they contradict is refused (the message names why). The default applies to
+    the command's own process only (`_command_process`): a script or a test that calls
+    `jaxdeploy.cli.main([...])` before it runs JAX itself would otherwise have all its later
+    JAX work split over the cores too."""
     import jax
 
     if args.distributed:
         return "--devices does not apply with --distributed" if args.devices else None
+    if args.devices is None and not _command_process():
+        return None
     fixed = _devices_fixed_by_environment()
     if fixed is not None:
         if args.devices is not None:
@@ -272,6 +276,14 @@ def _host_devices(args) -> str | None:
                 f"{jax.device_count()} device(s); run the command in a new process"
             )
     return None
+
+
+def _command_process() -> bool:
+    """Whether this process is the `jaxdeploy` command (its console script, or `python -m
+    jaxdeploy.cli`), not a Python program that called it."""
+    script = sys.argv[0] if sys.argv else ""
+    name = os.path.splitext(os.path.basename(script))[0]
+    return name == "jaxdeploy" or script.replace(os.sep, "/").endswith("jaxdeploy/cli.py")
 
 
 def _devices_fixed_by_environment() -> str | None:
