@@ -109,3 +109,22 @@ def test_jobs_must_be_positive(capsys):
     with pytest.raises(SystemExit) as exit_:
         tool.main(["--jobs", "0", "--list"])
     assert exit_.value.code == 2 and "--jobs 0 is invalid" in capsys.readouterr().err
+
+
+def test_ctrl_c_stops_the_running_generators_and_says_so(tmp_path, monkeypatch):
+    """An interrupt while generators run side by side terminates them (none is left running
+    behind the tool) and ends with one line naming them, not a traceback."""
+    monkeypatch.setattr(tool, "ROOT", str(tmp_path))
+    sleeper = Generator("sleeper", (sys.executable, "-c", "import time; time.sleep(600)"),
+                        ("docs/s.md",), 0.0, "test")  # fmt: skip
+    started = []
+
+    def interrupted(children):
+        started.extend(children)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(tool, "_wait_any", interrupted)
+    with pytest.raises(SystemExit) as exit_:
+        tool.run_parallel([sleeper], 2, keep_results=True)
+    assert "interrupted (Ctrl-C): stopped sleeper" in str(exit_.value)
+    assert started and all(c.process.poll() is not None for c in started)

@@ -166,14 +166,18 @@ def move_aside(folder: str) -> None:
         print(f"[pages] moved {folder} aside to {os.path.relpath(target, ROOT)}", flush=True)
 
 
+def _env() -> dict:
+    """A generator's environment: this one with the checkout on PYTHONPATH."""
+    path = os.pathsep.join(filter(None, [ROOT, os.environ.get("PYTHONPATH")]))
+    return {**os.environ, "PYTHONPATH": path}
+
+
 def run(generator: Generator) -> int:
     """Run one generator (its pages are written even when it exits non-zero: a fit that misses
     its criterion says so on the page); its exit status."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [ROOT, os.environ.get(
-        "PYTHONPATH")]))}  # fmt: skip
     start = time.perf_counter()
-    done = subprocess.run(generator.argv, cwd=os.path.join(ROOT, generator.cwd), env=env)
+    done = subprocess.run(generator.argv, cwd=os.path.join(ROOT, generator.cwd), env=_env())
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime) / 60
     _report(generator, done.returncode, 60 * cpu, time.perf_counter() - start)
@@ -234,14 +238,12 @@ class _Child:
     """A generator running as a child process, its output in `log`."""
 
     def __init__(self, generator: Generator, log_dir: str):
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [ROOT, os.environ.get(
-            "PYTHONPATH")]))}  # fmt: skip
         self.generator = generator
         self.log = os.path.join(log_dir, f"{generator.name}.log")
         self.began = time.perf_counter()
         with open(self.log, "w", encoding="utf-8") as out:
             self.process = subprocess.Popen(
-                generator.argv, cwd=os.path.join(ROOT, generator.cwd), env=env, stdout=out,
+                generator.argv, cwd=os.path.join(ROOT, generator.cwd), env=_env(), stdout=out,
                 stderr=subprocess.STDOUT,
             )  # fmt: skip
         print(f"[pages] {generator.name}: started (log {os.path.relpath(self.log, ROOT)})",
@@ -273,12 +275,27 @@ def run_parallel(chosen, jobs: int, keep_results: bool) -> list[str]:
     log_dir = os.path.join(ROOT, "results", "pages-logs")
     os.makedirs(log_dir, exist_ok=True)
 
+    children = []
+
     def start(generator):
         if generator.results and not keep_results:
             move_aside(generator.results)
-        return _Child(generator, log_dir)
+        children.append(_Child(generator, log_dir))
+        return children[-1]
 
-    return schedule(chosen, jobs, start, _wait_any)
+    try:
+        return schedule(chosen, jobs, start, _wait_any)
+    except KeyboardInterrupt:
+        # A stopped generator may have written some of its files: `git status` shows them.
+        running = [c for c in children if c.process.poll() is None]
+        for child in running:
+            child.process.terminate()
+        for child in running:
+            child.process.wait()
+        names = ", ".join(c.generator.name for c in running) or "none"
+        raise SystemExit(
+            f"[pages] interrupted (Ctrl-C): stopped {names}; `git status` shows what they wrote"
+        ) from None
 
 
 def select(only=(), quick=False, stale_only=False):
