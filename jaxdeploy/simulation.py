@@ -1,6 +1,7 @@
 """`simulate`: integrate a mechanism from a consistent state and report what happened.
 
-A thin layer over `diffrax.diffeqsolve` with the generalized-α solver (default) or the index-1
+An integration loop for the mechanism's solvers (`jaxdeploy.solvers.loop`, bit for bit
+`diffrax.diffeqsolve`'s run from a smaller program) with the generalized-α solver or the index-1
 ODE path (`solver="kvaerno5"` etc., see `jaxdeploy.solvers.SOLVER_NAMES`): fixed step (give
 `dt`) or adaptive (give `rtol`/`atol`), outputs at chosen times, solver statistics, and a
 status that says when and why a run failed (never silent NaN).
@@ -30,6 +31,7 @@ from .solvers import (
     MechanismTerm,
     StepControl,
     TrackExtremes,
+    loop,
     state_norm,
     stop_at_non_finite,
     tracked_episodes,
@@ -215,6 +217,13 @@ def _inner_scan_kind_for(adjoint, solver):
     return replace(solver, solver=replace(inner, scan_kind=kind))
 
 
+def _stopped_at_non_finite(controller, t0, t_end):
+    """`controller`, stopping the run at its last finite state once steps keep producing
+    non-finite values (`jaxdeploy.solvers.stop_at_non_finite`, relative to the time scale)."""
+    time_scale = jnp.maximum(jnp.abs(t0), jnp.abs(t_end))
+    return stop_at_non_finite(controller, jax.lax.stop_gradient(time_scale))
+
+
 def integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **options):
     """`diffrax.diffeqsolve` of the mechanism from `y0` over [t0, t_end], never throwing: a
     failure is reported in the solution's `result`, and a run whose steps keep producing
@@ -222,8 +231,9 @@ def integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **op
     (`jaxdeploy.solvers.stop_at_non_finite`). `options`: `saveat`, `adjoint`, …
 
     The lower-level half of `simulate`, for callers that drive the integration themselves
-    (e.g. pause and resume runs): give it the pieces `prepare` returns."""
-    time_scale = jnp.maximum(jnp.abs(t0), jnp.abs(t_end))
+    (e.g. pause and resume runs, or any of diffrax's `SaveAt`): give it the pieces `prepare`
+    returns. `simulate` itself integrates with `jaxdeploy.solvers.loop`, whose run is bit for
+    bit this one (tests/test_loop.py) from a smaller program."""
     return dfx.diffeqsolve(
         MechanismTerm(mechanism),
         solver,
@@ -231,7 +241,7 @@ def integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **op
         t1=t_end,
         dt0=dt0,
         y0=y0,
-        stepsize_controller=stop_at_non_finite(controller, jax.lax.stop_gradient(time_scale)),
+        stepsize_controller=_stopped_at_non_finite(controller, t0, t_end),
         max_steps=max_steps,
         throw=False,
         **options,
@@ -242,19 +252,18 @@ def integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **op
 def _accepted_step_times(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps):
     """The ends of the accepted steps of an adaptive run (padded with +inf to `max_steps`),
     and the run's result."""
-    sol = integrate(
-        mechanism,
-        y0,
+    sol = loop.solve(
+        MechanismTerm(mechanism),
+        solver,
+        _stopped_at_non_finite(controller, t0, t_end),
         t0,
         t_end,
         dt0,
-        solver,
-        controller,
+        y0,
         max_steps,
-        saveat=dfx.SaveAt(steps=True, fn=lambda t, y, args: None),
-        adjoint=dfx.RecursiveCheckpointAdjoint(),
+        save_steps=True,
     )
-    return sol.ts, sol.result
+    return sol.step_ts, sol.result
 
 
 def _replay_times(times, t0, t_end):
@@ -325,25 +334,23 @@ def _solve(
     mechanism, y0, t0, t_end, dt0, ts, solver, controller, max_steps, progress, adjoint,
     outputs="all",
 ):  # fmt: skip
-    meter = dfx.TqdmProgressMeter() if progress else dfx.NoProgressMeter()
-    keep = _OUTPUTS[outputs]
-    states = dfx.SubSaveAt(ts=ts) if keep is None else dfx.SubSaveAt(ts=ts, fn=keep)
-    return integrate(
-        mechanism,
-        y0,
+    """The run (`jaxdeploy.solvers.loop.solve`): states saved at `ts` through `outputs`'s
+    selection, the time reached, the result, the step counts and the final solver state (the
+    extremes and contact episodes `TrackExtremes` keeps)."""
+    return loop.solve(
+        MechanismTerm(mechanism),
+        solver,
+        _stopped_at_non_finite(controller, t0, t_end),
         t0,
         t_end,
         dt0,
-        solver,
-        controller,
+        y0,
         max_steps,
-        # The second output is the time the run reached (t_end unless it failed).
-        saveat=dfx.SaveAt(
-            subs=[states, dfx.SubSaveAt(t1=True, fn=lambda t, y, args: None)],
-            solver_state=True,
-        ),
-        progress_meter=meter,
-        adjoint=adjoint,
+        ts=ts,
+        fn=_OUTPUTS[outputs],
+        kind=loop.kind_for(adjoint),
+        checkpoints=getattr(adjoint, "checkpoints", None),
+        progress_meter=dfx.TqdmProgressMeter() if progress else None,
     )
 
 
@@ -488,14 +495,13 @@ def simulate(
         run.adjoint,
         outputs,
     )
-    (ts, end), (ys, _) = sol.ts, sol.ys
     return Trajectory.from_states(
-        ts,
-        ys,
+        sol.ts,
+        sol.ys,
         sol.result,
         solver_stats(sol.stats, sol.solver_state),
         step_times=run.step_times,
-        t_reached=end[0],
+        t_reached=sol.t_reached,
         extremes=_with_refined_peaks(
             tracked_extremes(sol.solver_state), tracked_episodes(sol.solver_state)
         ),
@@ -507,7 +513,7 @@ def simulate(
 def _with_refined_peaks(extremes, episodes):
     """The tracked extremes with each clearance joint's largest normal force and penetration
     taken as the larger of the sampled one (step ends and `extreme_samples` interior points)
-    and the maximum on each contact step's dense output (`jaxdeploy.solvers.step_maximum`,
+    and the maximum on each contact step's dense output (`jaxdeploy.solvers.step_maxima`,
     logged with the episodes): the true maximum within each step, not a sample."""
     if extremes is None or episodes is None or "normal_force_max" not in extremes:
         return extremes
@@ -581,6 +587,7 @@ def prepare(
     if not control.adaptive and isinstance(solver, GeneralizedAlpha):
         solver = replace(solver, estimate_error=False)
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
+    loop.kind_for(adjoint)  # refuses an adjoint the loop has no counterpart for, before work
     if not (isinstance(max_episodes, int) and max_episodes > 0):
         raise ValueError(f"max_episodes = {max_episodes!r} is invalid: it must be an integer > 0")
     solver = TrackExtremes(

@@ -21,7 +21,6 @@ FLOORS = {
     "_program_cache": 0,
     "_read_ahead": 0,
     "_tracing": 0,
-    "_loop": 3,
     "_xla_flags": 0,
     "contact": 1,
     "mechanism": 2,

@@ -11,18 +11,21 @@ import pytest
 
 from jaxdeploy import StepControl, get_scene
 from jaxdeploy.batch import run_scene
-from jaxdeploy.solvers import step_maximum
+from jaxdeploy.solvers import step_maxima, step_maximum
+from jaxdeploy.solvers.episodes import SAMPLES
 
 
 def test_step_maximum_finds_an_interior_peak_and_differentiates_by_the_envelope_theorem():
+    h, c, w = 2.0, 0.37, 0.01
+
     def peak(height, centre):
         def f(t):
-            return height * jnp.exp(-((t - centre) ** 2) / 0.01) + 0.1 * t
+            return height * jnp.exp(-((t - centre) ** 2) / w) + 0.1 * t
 
-        return step_maximum(f, 0.0, 1.0)[1]
+        t_hat, value, _ = step_maximum(f, 0.0, 1.0)
+        return value, t_hat
 
     # f' = 0 at t* with −2 h (t* − c)/w e^{…} + 0.1 = 0: solved by bisection here.
-    h, c, w = 2.0, 0.37, 0.01
     lo, hi = c, c + 0.1
     for _ in range(200):
         mid = 0.5 * (lo + hi)
@@ -30,15 +33,42 @@ def test_step_maximum_finds_an_interior_peak_and_differentiates_by_the_envelope_
         lo, hi = (mid, hi) if slope > 0 else (lo, mid)
     t_star = 0.5 * (lo + hi)
     exact = h * math.exp(-((t_star - c) ** 2) / w) + 0.1 * t_star
-    value = float(peak(h, c))
-    assert abs(value - exact) < 1e-13
+    value, _ = peak(h, c)
+    assert abs(float(value) - exact) < 1e-13
     # 8 samples alone would miss it by ~1e-2 (spacing 1/8 on a peak of width 0.1).
     samples = step_maximum(lambda t: h * jnp.exp(-((t - c) ** 2) / w) + 0.1 * t, 0.0, 1.0)[2]
     assert exact - float(jnp.max(samples)) > 1e-3
-    # Envelope theorem: d/dh = e^{−(t*−c)²/w}, d/dc = ∂f/∂c at t* = 2h(t*−c)/w e^{…} = 0.1.
-    d_height, d_centre = jax.grad(peak, argnums=(0, 1))(h, c)
-    np.testing.assert_allclose(float(d_height), math.exp(-((t_star - c) ** 2) / w), rtol=1e-10)
-    np.testing.assert_allclose(float(d_centre), 0.1, rtol=1e-8)
+    # The location, from values alone: near t* f = f* − ½|f''| δ², equal to f* in floating
+    # point once ½|f''| δ² < ε f*, so no value-only search places t* closer than
+    # δ = √(2 ε f*/|f''|) (Press et al., Numerical Recipes in C, 2nd ed., §10.1); f'' ≈ −2h/w here.
+    curvature = 2 * h / w
+    resolution = math.sqrt(2 * np.finfo(float).eps * exact / curvature)
+    (d_height, d_centre), t_hat = jax.grad(peak, argnums=(0, 1), has_aux=True)(h, c)
+    t_hat = float(t_hat)
+    assert abs(t_hat - t_star) <= 2 * resolution
+    # Envelope theorem: the derivative is ∂f/∂θ at the returned t̂ — d/dh = e^{−(t̂−c)²/w},
+    # d/dc = 2h(t̂−c)/w e^{…} — to round-off; at t* d/dc = 0.1, so it is 0.1 to within
+    # |∂²f/∂c∂t| |t̂ − t*| ≈ (2h/w) |t̂ − t*|.
+    e = math.exp(-((t_hat - c) ** 2) / w)
+    np.testing.assert_allclose(float(d_height), e, rtol=1e-13)
+    np.testing.assert_allclose(float(d_centre), 2 * h * (t_hat - c) / w * e, rtol=1e-12)
+    assert abs(float(d_centre) - 0.1) <= curvature * 2 * resolution
+
+
+def test_step_maxima_refines_each_component_as_step_maximum_does_alone():
+    def f(t):
+        return jnp.stack([jnp.sin(7.0 * t), -((t - 0.81) ** 2), jnp.exp(-t)])
+
+    t_star, peaks, values = step_maxima(f, 0.0, 1.0)
+    assert values.shape == (SAMPLES + 1, 3)
+    for i in range(3):
+        t_i, peak_i, values_i = step_maximum(lambda t, i=i: f(t)[i], 0.0, 1.0)
+        assert float(t_star[i]) == float(t_i) and float(peaks[i]) == float(peak_i)
+        np.testing.assert_array_equal(values[:, i], values_i)
+    # sin 7t peaks at π/14; the parabola at 0.81; e^{−t} at the interval's start (a sample).
+    np.testing.assert_allclose(np.asarray(t_star[:2]), [math.pi / 14, 0.81], atol=1e-8)
+    np.testing.assert_allclose(np.asarray(peaks), [1.0, 0.0, 1.0], atol=1e-15)
+    assert float(t_star[2]) == 0.0
 
 
 def test_hertz_impact_episode_against_johnsons_closed_forms():

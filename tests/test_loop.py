@@ -1,8 +1,9 @@
-"""jaxdeploy's own integration loop (`jaxdeploy._loop`) against `diffrax.diffeqsolve` as
-`simulate` calls it (`jaxdeploy.simulation._solve`): the same run, bit for bit, on every kind
-of solver and step-size controller `prepare` builds, on failed runs, and under forward- and
-reverse-mode differentiation. The loop is staged (its module docstring): these tests are
-what the switch of `simulate` to it rests on."""
+"""jaxdeploy's own integration loop (`jaxdeploy.solvers.loop`) against `diffrax.diffeqsolve`
+as `simulate` called it before it switched (`jaxdeploy.simulation.integrate`): the same run,
+bit for bit, on every kind of solver and step-size controller `prepare` builds, on failed runs,
+and under forward- and reverse-mode differentiation. These tests are
+what `simulate`'s switch to it rests on. The reference is `jaxdeploy.simulation.integrate`
+(diffeqsolve) with the `SaveAt` `simulate` used before the switch."""
 
 from __future__ import annotations
 
@@ -13,10 +14,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxdeploy import _loop
 from jaxdeploy.scenes import get_scene
-from jaxdeploy.simulation import _OUTPUTS, _accepted_step_times, _solve, prepare
-from jaxdeploy.solvers import MechanismTerm, stop_at_non_finite
+from jaxdeploy.simulation import _OUTPUTS, _accepted_step_times, _solve, integrate, prepare
+from jaxdeploy.solvers import MechanismTerm, loop, stop_at_non_finite
 
 
 def _scene_run(name, t_end, params=None, **options):
@@ -36,7 +36,7 @@ def _controller(run, t_end=None):
 @eqx.filter_jit
 def _ours(mech, run, outputs="all", kind=None, t_end=None, y0=None):
     t_end = run.t_end if t_end is None else t_end
-    return _loop.solve(
+    return loop.solve(
         MechanismTerm(mech),
         run.solver,
         _controller(run, t_end),
@@ -47,16 +47,33 @@ def _ours(mech, run, outputs="all", kind=None, t_end=None, y0=None):
         run.max_steps,
         ts=run.ts,
         fn=_OUTPUTS[outputs],
-        kind=kind or _loop.kind_for(run.adjoint),
+        kind=kind or loop.kind_for(run.adjoint),
     )
 
 
+@eqx.filter_jit
 def _diffrax(mech, run, outputs="all", t_end=None, y0=None):
+    """diffeqsolve as `simulate` called it before its switch to the loop: the states at `ts`
+    (through `outputs`'s selection), the time reached, the final solver state."""
     t_end = run.t_end if t_end is None else t_end
-    y0 = run.y0 if y0 is None else y0
+    keep = _OUTPUTS[outputs]
+    states = dfx.SubSaveAt(ts=run.ts) if keep is None else dfx.SubSaveAt(ts=run.ts, fn=keep)
+    return integrate(
+        mech, run.y0 if y0 is None else y0, run.t0, t_end, run.dt0, run.solver, run.controller,
+        run.max_steps,
+        saveat=dfx.SaveAt(
+            subs=[states, dfx.SubSaveAt(t1=True, fn=lambda t, y, args: None)],
+            solver_state=True,
+        ),
+        adjoint=run.adjoint,
+    )  # fmt: skip
+
+
+def _simulate_solve(mech, run, outputs="all"):
+    """The loop as `simulate` runs it (`jaxdeploy.simulation._solve`)."""
     return _solve(
-        mech, y0, run.t0, t_end, run.dt0, run.ts, run.solver, run.controller, run.max_steps,
-        False, run.adjoint, outputs,
+        mech, run.y0, run.t0, run.t_end, run.dt0, run.ts, run.solver, run.controller,
+        run.max_steps, False, run.adjoint, outputs,
     )  # fmt: skip
 
 
@@ -82,6 +99,7 @@ def _assert_same_run(mech, run, outputs="all"):
     for key in ("num_steps", "num_accepted_steps", "num_rejected_steps", "max_steps"):
         assert int(a.stats[key]) == int(b.stats[key]), key
     _assert_identical(a.solver_state, b.solver_state, "final solver state (extremes, episodes)")
+    _assert_identical(b, _simulate_solve(mech, run, outputs), "simulate's run of the loop")
     return a, b
 
 
@@ -182,16 +200,20 @@ def test_a_run_whose_field_turns_nan_stops_as_diffrax_does(options):
 
 def test_accepted_step_ends_are_diffrax_steps():
     mech, run = _scene_run("slider_crank", 1e-3, solver="tsit5", rtol=1e-6, atol=1e-9)
+    reference = eqx.filter_jit(integrate)(
+        mech, run.y0, run.t0, run.t_end, run.dt0, run.solver, run.controller, run.max_steps,
+        saveat=dfx.SaveAt(steps=True, fn=lambda t, y, args: None),
+    )  # fmt: skip
     times, result = _accepted_step_times(
         mech, run.y0, run.t0, run.t_end, run.dt0, run.solver, run.controller, run.max_steps
     )
-    ours = eqx.filter_jit(_loop.solve)(
+    _assert_identical(reference.ts, times, "accepted step ends")
+    assert int(reference.result._value) == int(result._value)
+    ours = eqx.filter_jit(loop.solve)(
         MechanismTerm(mech), run.solver, _controller(run), run.t0, run.t_end, run.dt0, run.y0,
         run.max_steps, save_steps=True,
     )  # fmt: skip
-    _assert_identical(times, ours.step_ts, "accepted step ends")
     assert ours.ts is None and ours.ys is None
-    assert int(result._value) == int(ours.result._value)
 
 
 def test_a_run_of_zero_length_saves_its_initial_state_everywhere():
@@ -231,7 +253,7 @@ def test_reverse_mode_is_diffrax_reverse_mode():
 def test_forward_mode_is_diffrax_forward_mode():
     mech, run = _scene_run("slider_crank", 5e-4, solver="tsit5", rtol=1e-6, atol=1e-9,
                            n_save=51, adjoint=dfx.ForwardMode())  # fmt: skip
-    assert _loop.kind_for(run.adjoint) == "lax"
+    assert loop.kind_for(run.adjoint) == "lax"
 
     def tangent(solve):
         loss = lambda s: _crank_loss(solve, mech, run, s)  # noqa: E731
@@ -247,12 +269,12 @@ def test_forward_mode_is_diffrax_forward_mode():
 
 
 def test_each_adjoint_has_its_loop_and_others_are_refused():
-    assert _loop.kind_for(None) == "checkpointed"
-    assert _loop.kind_for(dfx.RecursiveCheckpointAdjoint()) == "checkpointed"
-    assert _loop.kind_for(dfx.ForwardMode()) == "lax"
-    assert _loop.kind_for(dfx.DirectAdjoint()) == "bounded"
+    assert loop.kind_for(None) == "checkpointed"
+    assert loop.kind_for(dfx.RecursiveCheckpointAdjoint()) == "checkpointed"
+    assert loop.kind_for(dfx.ForwardMode()) == "lax"
+    assert loop.kind_for(dfx.DirectAdjoint()) == "bounded"
     with pytest.raises(ValueError, match="BacksolveAdjoint"):
-        _loop.kind_for(dfx.BacksolveAdjoint())
+        loop.kind_for(dfx.BacksolveAdjoint())
 
 
 @pytest.mark.parametrize(
@@ -263,7 +285,7 @@ def test_bad_loop_arguments_are_named(keywords, message):
     mech, run = _scene_run("pendulum", 0.1)
     arguments = {"max_steps": run.max_steps, **keywords}
     with pytest.raises(ValueError, match=message):
-        _loop.solve(
+        loop.solve(
             MechanismTerm(mech), run.solver, run.controller, run.t0, run.t_end, run.dt0,
             run.y0, arguments.pop("max_steps"), **arguments,
         )  # fmt: skip
@@ -275,4 +297,4 @@ def test_the_end_time_threshold_is_a_hundred_ulps_below_t1():
         for _ in range(100):
             expected = jnp.nextafter(expected, -jnp.inf) if float(expected) != 0.0 else (
                 -jnp.finfo(float).tiny)  # fmt: skip
-        assert float(_loop.clip_floor(jnp.asarray(t1))) == float(expected), t1
+        assert float(loop.clip_floor(jnp.asarray(t1))) == float(expected), t1

@@ -1,6 +1,6 @@
 """Time integrators for mechanisms."""
 
-from .episodes import EpisodeLog, step_maximum
+from .episodes import EpisodeLog, step_maxima, step_maximum
 from .event_location import LocateEvents
 from .extremes import (
     TrackedState,
@@ -55,6 +55,7 @@ __all__ = [
     "solver_by_name",
     "stabilised_accelerations",
     "state_norm",
+    "step_maxima",
     "step_maximum",
     "tolerances_as_data",
     "stop_at_non_finite",

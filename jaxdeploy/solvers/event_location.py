@@ -79,6 +79,7 @@ class LocateEvents(WrappedController):
         relocate = keep & inside
         next_t0 = jnp.where(relocate, t0, next_t0)
         next_t1 = jnp.where(relocate, t0 + retry_length, next_t1)
-        made_jump = jnp.where(relocate, False, made_jump)
+        if made_jump is not False:  # a static False (PID's) stays static: a relocated step
+            made_jump = jnp.where(relocate, False, made_jump)  # makes no jump either
         next_state = jax.tree.map(lambda new, old: jnp.where(relocate, old, new), next_state, state)
         return keep & ~relocate, next_t0, next_t1, made_jump, next_state, result

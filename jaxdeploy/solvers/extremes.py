@@ -24,7 +24,7 @@ midpoint sample, +29 % with an acceleration solve).
 
 The clearance joints' largest normal force and penetration are then refined: `simulate` takes
 the larger of these samples and the maximum on each contact step's dense output that the
-episode log finds (`jaxdeploy.solvers.episodes.step_maximum`), so `Trajectory.extremes` holds
+episode log finds (`jaxdeploy.solvers.episodes.step_maxima`), so `Trajectory.extremes` holds
 the true maximum within the step for them (sampled alone, a pendulum's impact peak was reported
 0.09 % low at a tight tolerance in issue 31; the refined one matches Johnson's closed form to
 1e-8, tests/test_episodes.py).
@@ -138,7 +138,7 @@ def _motion(dense, t):
     """`(q, q̇, memory)` of a dense output at `t`: its `motion` (no acceleration solve) where
     it has one, else its `evaluate` (whose q̈ is left unused). Traced once per program: a
     step evaluates it at its midpoint and, for each clearance joint in contact, at the
-    episode log's samples and Newton steps (`episodes.step_maximum`), each in each of
+    episode log's samples and parabolic steps (`episodes.step_maxima`), each in each of
     diffrax's three traces of the step; the Runge–Kutta interpolant was a third of tracing
     slider_crank's run."""
     if hasattr(dense, "motion"):

@@ -46,9 +46,9 @@ Differentiation: `kind` chooses the while loop as diffrax's adjoints do
 in place), `"lax"` for forward mode (`ForwardMode`), `"bounded"` for both (`DirectAdjoint`).
 `kind_for(adjoint)` maps an adjoint to its kind.
 
-Status: staged. `simulate` still calls `diffeqsolve` (`jaxdeploy.simulation.integrate`); it
-switches to this loop, and the module moves to `jaxdeploy/solvers/`, in the change that
-regenerates every page that measures the integration (issue 32).
+`jaxdeploy.simulation.simulate` integrates with it (`_solve`, and `_accepted_step_times` for
+replayed steps); `jaxdeploy.simulation.integrate` keeps `diffeqsolve` for callers that need its
+other options.
 """
 
 from __future__ import annotations
