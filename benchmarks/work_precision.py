@@ -505,7 +505,9 @@ def loop_operations(ours, ts, control) -> dict:
         return [(re.search(r"body=(%[\w.\-]+)", line).group(1), line)
                 for op, line in instructions(name) if op == "while"]  # fmt: skip
 
-    (step,) = [body for body, _ in loops(entry)]
+    # The step loop is the entry's largest loop (jaxdeploy's loop also has a small one of 100
+    # `nextafter` for its end-time threshold).
+    step = max((body for body, _ in loops(entry)), key=lambda body: len(bodies[body]))
     inner = loops(step)
     saves = [body for body, line in inner if f"[{ts.size}" in line]
     stages = [body for body, line in inner if f"[{ts.size}" not in line]
