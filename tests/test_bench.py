@@ -95,7 +95,7 @@ def test_timed_calls_takes_the_fastest_of_enough_warm_calls():
     assert math.isnan(warm) and stats["warm_calls"] == 0
 
 
-def test_cached_first_call_is_its_own_row_and_not_the_verdict():
+def test_cached_first_call_is_its_own_row_with_its_own_goal():
     rows = [
         dict(_row("jaxdeploy", 1e-6, 0.02, 9.0), first_cached_s=0.3),
         _row("jaxdeploy", 1e-9, 0.05, 8.0),  # a family without a cached measurement
@@ -110,8 +110,11 @@ def test_cached_first_call_is_its_own_row_and_not_the_verdict():
     record = provenance.finish(provenance.start(["benchmarks"], allow_dirty=True))
     record["wall_s"] = 1.0
     text = page.render(record, wp, {}, command="make bench", cut=[])
+    # Issue 32's goals: first call ≤ 20× the best peer, with the caches filled ≤ 2×.
     assert "| work–precision first call (compile included), error ≤ 1e-06 m | 160.00" in text
-    assert "persistent caches filled (not the target), error ≤ 1e-06 m | 6.00" in text
+    assert "(8 s / 0.05 s) | ≤ 20 | missed: 8× the goal |" in text
+    assert "persistent caches filled, error ≤ 1e-06 m | 6.00" in text
+    assert "(0.3 s / 0.05 s) | ≤ 2 | missed: 3× the goal |" in text
     assert "Warm: the fastest of 3" in text
 
 
