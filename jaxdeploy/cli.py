@@ -51,6 +51,15 @@ def _interrupt_line(command: str) -> str:
     return f"interrupted: jaxdeploy {command} stopped (Ctrl-C)"
 
 
+def _flush_if_free(stream) -> None:
+    """Flush `stream` unless the interrupted main thread holds it (or it is closed): what it
+    was writing may then be lost, the interrupt line is not."""
+    try:
+        stream.flush()
+    except (RuntimeError, ValueError, OSError):
+        pass
+
+
 def _interrupted(command: str):
     """The program's SIGINT handler: one line, the output folders closed (an unfinished
     result's staging folder removed, the lock released; a sweep's finished chunks are already
@@ -62,10 +71,15 @@ def _interrupted(command: str):
     def handler(signum, frame):
         from ._output_folder import close_all
 
-        print(_interrupt_line(command), file=sys.stderr)
+        # The handler runs between two bytecodes of the main thread, which may be inside a
+        # write to sys.stderr or sys.stdout (a phase line, a progress bar): writing or
+        # flushing that stream again raises "reentrant call inside <_io.BufferedWriter>" and
+        # the command ends with a traceback and exit 1 (seen in CI). So the line goes to the
+        # file descriptor itself, and the streams' own flushes may fail.
+        _flush_if_free(sys.stderr)
+        os.write(2, (_interrupt_line(command) + "\n").encode())
         close_all()
-        sys.stdout.flush()
-        sys.stderr.flush()
+        _flush_if_free(sys.stdout)
         os._exit(EXIT_INTERRUPTED)
 
     return handler

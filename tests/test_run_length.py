@@ -165,3 +165,33 @@ def test_a_real_ctrl_c_during_the_probe_ends_with_one_line_and_exit_130(tmp_path
     assert err.strip().splitlines()[-1] == "interrupted: jaxdeploy simulate stopped (Ctrl-C)"
     assert "Traceback" not in err
     assert os.listdir(tmp_path) == []
+
+
+def test_the_ctrl_c_handler_writes_its_line_while_the_interrupted_code_holds_stderr(tmp_path):
+    """The handler runs between two bytecodes of the main thread, which can be inside a write
+    to stderr: writing to the stream again raised "reentrant call inside
+    <_io.BufferedWriter name='<stderr>'>" and exit 1 in CI. Here every use of sys.stderr and
+    sys.stdout raises that error, as the held streams do: the line still comes, exit 130."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "handler.py"
+    script.write_text(
+        "import sys\n"
+        "from jaxdeploy import cli\n"
+        "class Held:\n"
+        "    def write(self, text):\n"
+        "        raise RuntimeError('reentrant call inside <_io.BufferedWriter>')\n"
+        "    def flush(self):\n"
+        "        raise RuntimeError('reentrant call inside <_io.BufferedWriter>')\n"
+        "    def fileno(self):\n"
+        "        return 2\n"
+        "handler = cli._interrupted('simulate')\n"
+        "sys.stderr = sys.stdout = Held()\n"
+        "handler(2, None)\n"
+    )
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": root}, timeout=120)  # fmt: skip
+    assert done.returncode == 130, done.stderr
+    assert done.stderr.strip().splitlines() == ["interrupted: jaxdeploy simulate stopped (Ctrl-C)"]

@@ -111,13 +111,13 @@ GENERATORS = (
               "CPU, load 15-20, at b287360: impact 3, deploy 12; long never run, capped by "
               "--budget-min 20", results="results/robustness"),
     Generator("identification", (PY, "experiments/identification.py", "--regenerate", "--rerun"),
-              (f"{I} [identification]",), 55.9, "CPU, load 2-4, at 847ace3 (50 min wall)"),
+              (f"{I} [identification]",), 10.0, "CPU, load 3.6, at a7ac46c (6.9 min wall)"),
     Generator("identification_landscape", (PY, "experiments/identification_landscape.py"),
               (f"{I} [identification_landscape]",), 1.2, "CPU, load 2.7, at 847ace3"),
     Generator("identification_independent",
               (PY, "experiments/identification_independent.py", "--rerun"),
-              (f"{I} [identification_independent]",), 5.1, "CPU of the four fits, load 2-4 "
-              "(page: 56 + 54 + 49 + 147 s)"),
+              (f"{I} [identification_independent]",), 3.1, "CPU, load 1.7, at a7ac46c (2.3 min "
+              "wall; page: 29 + 36 + 33 + 59 s CPU of the four fits)"),
     Generator("identification_solvers", (PY, "experiments/identification_solvers.py", "--rerun"),
               (f"{I} [identification_solvers]",), 15.4, "CPU of the 16 fits, load 13-29 (page)"),
     Generator("gradcheck_lock_time", (PY, "experiments/gradcheck_lock_time.py"),
