@@ -177,35 +177,3 @@ def test_slider_crank_trajectory_is_the_same_with_either_schur_factor(unrolled_m
     for name in ("q", "v", "qdd", "lam"):
         a, b = np.asarray(getattr(unrolled, name)), np.asarray(getattr(lapack, name))
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * np.max(np.abs(b)), err_msg=name)
-
-
-@pytest.mark.parametrize("unrolled_max_size", [0, saddle_point.UNROLLED_MAX_SIZE])
-def test_range_space_derivatives_are_the_linear_systems_in_both_modes(
-    system, unrolled_max_size, monkeypatch
-):
-    # range_space_solution's derivative is written out (its custom JVP reuses the factor).
-    # Reference: the LU of the whole (n + m)² matrix differentiated by JAX's own rules, which
-    # share nothing with it, and central differences of the solution itself.
-    monkeypatch.setattr(saddle_point, "UNROLLED_MAX_SIZE", unrolled_max_size)
-    mass_inverse, jac, f, g = (jnp.asarray(a) for a in system)
-    rng = np.random.default_rng(7)
-    tangents = tuple(jnp.asarray(rng.normal(size=a.shape)) for a in (mass_inverse, jac, f, g))
-    tangents = (tangents[0] * mass_inverse * 1e-1, *tangents[1:])  # keep M⁻¹ positive
-    primals = (mass_inverse, jac, f, g)
-    (x, lam), (dx, dlam) = jax.jvp(range_space_solution, primals, tangents)
-    (x_lu, lam_lu), (dx_lu, dlam_lu) = jax.jvp(kkt_lu_solution, primals, tangents)
-    np.testing.assert_allclose(dx, dx_lu, rtol=1e-10, atol=1e-10 * float(jnp.abs(dx_lu).max()))
-    np.testing.assert_allclose(
-        dlam, dlam_lu, rtol=1e-10, atol=1e-10 * float(jnp.abs(dlam_lu).max())
-    )
-    h = 1e-6
-    plus = range_space_solution(*(p + h * t for p, t in zip(primals, tangents, strict=True)))
-    minus = range_space_solution(*(p - h * t for p, t in zip(primals, tangents, strict=True)))
-    np.testing.assert_allclose(dx, (plus[0] - minus[0]) / (2 * h), rtol=1e-6, atol=1e-8)
-    # Reverse mode transposes the same linear map: ⟨w, J t⟩ = ⟨Jᵀ w, t⟩.
-    w = (jnp.asarray(rng.normal(size=x.shape)), jnp.asarray(rng.normal(size=lam.shape)))
-    _, pullback = jax.vjp(range_space_solution, *primals)
-    cotangents = pullback(w)
-    forward = jnp.vdot(w[0], dx) + jnp.vdot(w[1], dlam)
-    reverse = sum(jnp.vdot(c, t) for c, t in zip(cotangents, tangents, strict=True))
-    np.testing.assert_allclose(float(reverse), float(forward), rtol=1e-12)

@@ -33,7 +33,6 @@ results then hold NaN or inf, which the integrators report as a failed step.
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 
@@ -118,45 +117,12 @@ def schur_solve(factor, rhs):
     return unrolled_cholesky_solve(factor, rhs)
 
 
-def _range_space_solve(factor, mass_inverse, jacobian, forces, rhs):
-    """Eq. (2) and the back-substitution for x, with `S`'s factor given."""
-    lam = schur_solve(factor, jacobian @ (mass_inverse * forces) - rhs)
-    return mass_inverse * (forces - jacobian.T @ lam), lam
-
-
-@jax.custom_jvp
 def range_space_solution(mass_inverse, jacobian, forces, rhs):
     """`(x, λ)` solving eq. (1) with `f = forces`, `g = rhs` by eq. (2): e.g. `(q̈, λ)` of
-    `M q̈ + Jᵀ λ = Q`, `J q̈ = γ`.
-
-    Its derivative is that of the linear system, not of the factorisation: differentiating
-    (1), M ẋ + J̇ᵀ λ + Jᵀ λ̇ = ḟ − Ṁ x and J ẋ = ġ − J̇ x, so the tangent (ẋ, λ̇) solves (1)
-    with the same matrix and right-hand side (ḟ − Ṁ x − J̇ᵀ λ, ġ − J̇ x), Ṁ = −(M⁻¹)˙ / (M⁻¹)²
-    (the derivative of a linear solve, d(A⁻¹b) = A⁻¹(ḃ − Ȧ A⁻¹ b): Giles, "Collected matrix
-    derivative results for forward and reverse mode algorithmic differentiation", in
-    *Advances in Automatic Differentiation*, Springer, 2008, 35-44). Each tangent reuses the
-    primal's Cholesky factor instead of carrying the factorisation's own tangent; reverse mode
-    transposes this linear map."""
-    return _range_space_solve(
-        schur_factor(mass_inverse, jacobian), mass_inverse, jacobian, forces, rhs
-    )
-
-
-@range_space_solution.defjvp
-def _range_space_solution_jvp(primals, tangents):
-    mass_inverse, jacobian, forces, rhs = primals
-    d_mass_inverse, d_jacobian, d_forces, d_rhs = tangents
+    `M q̈ + Jᵀ λ = Q`, `J q̈ = γ`."""
     factor = schur_factor(mass_inverse, jacobian)
-    x, lam = _range_space_solve(factor, mass_inverse, jacobian, forces, rhs)
-    d_mass_x = -(d_mass_inverse / mass_inverse**2) * x  # Ṁ x, M = diag(1 / M⁻¹)
-    dx, dlam = _range_space_solve(
-        factor,
-        mass_inverse,
-        jacobian,
-        d_forces - d_mass_x - d_jacobian.T @ lam,
-        d_rhs - d_jacobian @ x,
-    )
-    return (x, lam), (dx, dlam)
+    lam = schur_solve(factor, jacobian @ (mass_inverse * forces) - rhs)
+    return mass_inverse * (forces - jacobian.T @ lam), lam
 
 
 def kkt_lu_solution(mass_inverse, jacobian, forces, rhs):
