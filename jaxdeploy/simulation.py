@@ -30,6 +30,7 @@ from .solvers import (
     MechanismState,
     MechanismTerm,
     StepControl,
+    TrackedState,
     TrackExtremes,
     loop,
     state_norm,
@@ -52,6 +53,15 @@ __all__ = [
     "prepare",
     "simulate",
 ]
+
+
+def result_code(result) -> np.ndarray:
+    """The integer code of a diffrax `RESULTS` item (`successful` is 0), as a NumPy array.
+
+    Comparing two items with `==` is a JAX operation, which a process compiles on its first
+    use (a few ms of a cached first call); the code compares in NumPy. A concrete result only
+    (under a transformation, compare the items)."""
+    return np.asarray(result._value)
 
 
 class Trajectory(eqx.Module):
@@ -112,7 +122,7 @@ class Trajectory(eqx.Module):
 
     @property
     def ok(self) -> bool:
-        return bool(self.result == dfx.RESULTS.successful)
+        return bool(result_code(self.result) == result_code(dfx.RESULTS.successful))
 
     def time_reached(self) -> float:
         """The time [s] the integration reached (`t_reached`; for a trajectory without it,
@@ -336,8 +346,10 @@ def _solve(
 ):  # fmt: skip
     """The run (`jaxdeploy.solvers.loop.solve`): states saved at `ts` through `outputs`'s
     selection, the time reached, the result, the step counts and the final solver state (the
-    extremes and contact episodes `TrackExtremes` keeps)."""
-    return loop.solve(
+    extremes and contact episodes `TrackExtremes` keeps, each peak refined by
+    `_with_refined_peaks`: inside the program, where after it the two maxima would be JAX
+    operations compiled on a process's first call)."""
+    sol = loop.solve(
         MechanismTerm(mechanism),
         solver,
         _stopped_at_non_finite(controller, t0, t_end),
@@ -352,6 +364,11 @@ def _solve(
         checkpoints=getattr(adjoint, "checkpoints", None),
         progress_meter=dfx.TqdmProgressMeter() if progress else None,
     )
+    state = sol.solver_state
+    if not isinstance(state, TrackedState):
+        return sol
+    extremes = _with_refined_peaks(state.extremes, state.episodes)
+    return sol._replace(solver_state=state._replace(extremes=extremes))
 
 
 def simulate(
@@ -502,9 +519,7 @@ def simulate(
         solver_stats(sol.stats, sol.solver_state),
         step_times=run.step_times,
         t_reached=sol.t_reached,
-        extremes=_with_refined_peaks(
-            tracked_extremes(sol.solver_state), tracked_episodes(sol.solver_state)
-        ),
+        extremes=tracked_extremes(sol.solver_state),
         episodes=tracked_episodes(sol.solver_state),
         control=run.control,
     )
@@ -605,7 +620,7 @@ def prepare(
         if not control.adaptive:
             raise ValueError("step_ts needs adaptive steps (give rtol/atol)")
         controller = dfx.ClipStepSizeController(controller, step_ts=jnp.asarray(step_ts, float))
-    if locate_events and control.adaptive and mechanism.event_fraction(y0.memory) is not None:
+    if locate_events and control.adaptive and mechanism.locates_events(y0.memory):
         dt_min_data = None if dt_min is None else jnp.asarray(dt_min, dtype=float)
         controller = LocateEvents(controller, mechanism, dt_min=dt_min_data)
     step_times = None

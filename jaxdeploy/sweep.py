@@ -53,6 +53,7 @@ from .io import (
     strict_json,
 )
 from .scenes.base import Scene
+from .simulation import result_code
 from .solvers.step_control import StepControl
 
 MANIFEST = "manifest.json"
@@ -385,7 +386,7 @@ def _prefix_runner(run, setup: _Setup, k: int):
     def run_to(t: float) -> tuple[int, bool, tuple]:
         trajectory, _ = run(inputs, t_end=t, ts=jnp.linspace(0.0, t, n_save))
         trajectory = _gather(trajectory)
-        result, steps = np.asarray(trajectory.result._value), trajectory.stats["num_steps"]
+        result, steps = result_code(trajectory.result), trajectory.stats["num_steps"]
         # The chunk's first case as `summarize` gets it (its host work is part of a case's
         # cost too).
         first = int(_chunk_range(setup, k)[0])

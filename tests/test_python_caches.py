@@ -8,6 +8,8 @@ import os
 import subprocess
 import sys
 
+_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
 # A user's script: the scene, its initial state (an assembly program) and a run (the solve).
 # It prints the names of the functions JAX traced in this process and the run's output.
 _SCRIPT = """
@@ -113,3 +115,56 @@ def test_caches_called_after_equinox_warn_and_keep_the_compilation_cache(tmp_pat
         [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
     )
     assert proc.stdout.split("\n")[:2] == ["True True True", "None None"], proc.stdout
+
+
+# The run alone, recorded: with the programs read back, `simulate` and its verdict should run
+# no JAX operation outside them but the save times (JAX traces, lowers and looks up each one on
+# a process's first call: ~4 ms apiece, as much as the whole run of a short slider-crank).
+_RUN_ONLY_SCRIPT = """
+import json, sys
+from jax import monitoring
+
+import jaxdeploy as jd
+jd.enable_caches(sys.argv[1])
+scene = jd.get_scene("slider_crank")
+params = scene.resolve_params()
+mechanism = scene.build(params)
+initial = scene.initial_state(params, mechanism)
+
+traced = []
+def record(event, start, end, **kwargs):
+    if event == "/jax/core/compile/jaxpr_trace_duration":
+        traced.append(kwargs.get("fun_name"))
+monitoring.register_event_time_span_listener(record)
+trajectory = jd.simulate(mechanism, initial, 0.002, n_save=11, control=scene.default_control)
+status = trajectory.status()
+peak = trajectory.extremes["normal_force_max"]
+print(json.dumps({"traced": traced, "status": status, "peak": peak.tolist()}))
+"""
+
+
+def test_second_process_simulates_a_clearance_joint_without_tracing_anything(tmp_path):
+    """slider_crank (a clearance joint: located events, refined peaks): in the second process
+    the run and its status trace no single operation but the save times (before,
+    deciding whether to locate events, refining the peaks after the program and comparing the
+    result code each traced one: a cached first call at 2x its warm call)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [_ROOT, env.get("PYTHONPATH")]))
+    runs = []
+    for _ in range(2):
+        proc = subprocess.run(
+            [sys.executable, "-c", _RUN_ONLY_SCRIPT, str(tmp_path / "cache")],
+            env=env,
+            capture_output=True,
+            text=True,
+            cwd=tmp_path,
+        )
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+    first, second = runs
+    assert "exported__solve" in first["traced"], first["traced"]
+    # One operation is left on purpose: the save times, `jnp.linspace` (numpy's differs from
+    # it in the last bit at most saved times, which would move every saved state).
+    assert second["traced"] == ["_linspace"], second["traced"]
+    assert first["status"] == second["status"] == "ok"
+    assert second["peak"] == first["peak"] and all(p > 0 for p in second["peak"])

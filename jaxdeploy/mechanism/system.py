@@ -273,12 +273,20 @@ class Mechanism(eqx.Module):
         """The earliest event inside the last accepted step, as a fraction of the step (≥ 1:
         none), over the elements that locate events (`AbstractElement.event_fraction`);
         `None` when no element does (then nothing is traced for it)."""
-        fractions = [
+        fractions = self._event_fractions(memory)
+        return jnp.min(jnp.stack(fractions)) if fractions else None
+
+    def locates_events(self, memory) -> bool:
+        """Whether an element locates events (`event_fraction` is not None), decided without a
+        JAX operation: outside a trace each would be compiled on a process's first call."""
+        return bool(self._event_fractions(memory))
+
+    def _event_fractions(self, memory) -> list:
+        return [
             f
             for e, m in zip(self.elements, memory, strict=True)
             if e.has_memory and (f := e.event_fraction(m)) is not None
         ]
-        return jnp.min(jnp.stack(fractions)) if fractions else None
 
     def switched(self, memory_before, memory_after):
         """Whether a step flipped any element's switch flag (`AbstractElement.switch_flags`)."""
