@@ -205,16 +205,19 @@ def _read_ahead_for_script() -> None:
     from . import _read_ahead
 
     script = sys.argv[0] if sys.argv else ""
-    if script and os.path.isfile(script) and not _is_command_line(script):
+    if script and os.path.isfile(script) and not is_command_line(script):
         _read_ahead.start("python " + os.path.abspath(script))
 
 
-def _is_command_line(script: str) -> bool:
-    """Whether `script` is the `jaxdeploy` command (its console script, or `python -m
-    jaxdeploy.cli`), which `JAXDEPLOY_CACHE_DIR` also reaches on import. Its commands read
+def is_command_line(script: str | None = None) -> bool:
+    """Whether `script` (default: this process's, `sys.argv[0]`) is the `jaxdeploy` command
+    (its console script, or `python -m jaxdeploy.cli`), not a Python program that imports or
+    calls it. `JAXDEPLOY_CACHE_DIR` also reaches the command on import; its commands read
     ahead their own programs under their own names (`jaxdeploy simulate`); one name for every
     command would read a simulate's programs into a sweep, and the reading starts JAX's backend
     before `jaxdeploy sweep` can choose its devices."""
+    if script is None:
+        script = sys.argv[0] if sys.argv else ""
     here = os.path.dirname(os.path.abspath(__file__))
     name = os.path.splitext(os.path.basename(script))[0]  # the console script, any platform
     return name == "jaxdeploy" or os.path.abspath(script) == os.path.join(here, "cli.py")

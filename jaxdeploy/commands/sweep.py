@@ -251,14 +251,16 @@ def _host_devices(args) -> str | None:
     (`XLA_FLAGS=--xla_force_host_platform_device_count`, `JAX_NUM_CPU_DEVICES`), with
     --distributed, or after JAX started, the devices are left as they are, and an explicit
     --devices that they contradict is refused (the message names why). The default applies to
-    the command's own process only (`_command_process`): a script or a test that calls
-    `jaxdeploy.cli.main([...])` before it runs JAX itself would otherwise have all its later
-    JAX work split over the cores too."""
+    the command's own process only (`_compilation_cache.is_command_line`): a script or a test
+    that calls `jaxdeploy.cli.main([...])` before it runs JAX itself would otherwise have all
+    its later JAX work split over the cores too."""
     import jax
+
+    from .._compilation_cache import is_command_line
 
     if args.distributed:
         return "--devices does not apply with --distributed" if args.devices else None
-    if args.devices is None and not _command_process():
+    if args.devices is None and not is_command_line():
         return None
     fixed = _devices_fixed_by_environment()
     if fixed is not None:
@@ -276,14 +278,6 @@ def _host_devices(args) -> str | None:
                 f"{jax.device_count()} device(s); run the command in a new process"
             )
     return None
-
-
-def _command_process() -> bool:
-    """Whether this process is the `jaxdeploy` command (its console script, or `python -m
-    jaxdeploy.cli`), not a Python program that called it."""
-    script = sys.argv[0] if sys.argv else ""
-    name = os.path.splitext(os.path.basename(script))[0]
-    return name == "jaxdeploy" or script.replace(os.sep, "/").endswith("jaxdeploy/cli.py")
 
 
 def _devices_fixed_by_environment() -> str | None:
