@@ -364,6 +364,12 @@ def _solve(
         checkpoints=getattr(adjoint, "checkpoints", None),
         progress_meter=dfx.TqdmProgressMeter() if progress else None,
     )
+    return _with_refined_solution(sol)
+
+
+def _with_refined_solution(sol):
+    """`sol` (a `loop.Solution`) with its tracked extremes' peaks refined
+    (`_with_refined_peaks`); unchanged without tracked extremes."""
     state = sol.solver_state
     if not isinstance(state, TrackedState):
         return sol
