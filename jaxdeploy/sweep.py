@@ -414,7 +414,7 @@ def _run_chunk(run, setup: _Setup, k: int, summarize, save_trajectories: bool):
     n = len(index)
     arrays = {
         "case": index,
-        "result": np.asarray(trajectory.result._value)[:n],
+        "result": result_code(trajectory.result)[:n],
         "num_steps": np.asarray(trajectory.stats["num_accepted_steps"])[:n],
         "num_rejected": np.asarray(trajectory.stats["num_rejected_steps"])[:n],
         **{f"param_{name}": table[name][index] for name in table},
