@@ -227,7 +227,15 @@ def key(fn, args) -> str | None:
 
 def call(fn, *args):
     """`fn(*args)` (`fn` an `equinox.filter_jit` function), through the store when it is on
-    and the call is cacheable (module docstring)."""
+    and the call is cacheable (module docstring). Full garbage collections wait while it
+    traces, lowers and compiles (`_collector`)."""
+    from ._collector import full_collections_deferred
+
+    with full_collections_deferred():
+        return _call(fn, *args)
+
+
+def _call(fn, *args):
     import equinox as eqx
     import jax
 

@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _program_cache
+from ._collector import deferring_full_collections
 from ._validation import is_concrete
 from .mechanism import ConsistentState, Mechanism
 from .solvers import (
@@ -259,6 +260,7 @@ def integrate(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps, **op
 
 
 @eqx.filter_jit
+@deferring_full_collections
 def _accepted_step_times(mechanism, y0, t0, t_end, dt0, solver, controller, max_steps):
     """The ends of the accepted steps of an adaptive run (padded with +inf to `max_steps`),
     and the run's result."""
@@ -340,6 +342,7 @@ _OUTPUTS = {"all": None, "state": _state_only, "motion": _motion_only}
 
 
 @eqx.filter_jit
+@deferring_full_collections  # its body runs while JAX traces it
 def _solve(
     mechanism, y0, t0, t_end, dt0, ts, solver, controller, max_steps, progress, adjoint,
     outputs="all",

@@ -19,6 +19,7 @@ FLOORS = {
     "pages": 0,
     "_compilation_cache": 0,
     "_program_cache": 0,
+    "_collector": 0,
     "_read_ahead": 0,
     "_tracing": 0,
     "_xla_flags": 0,

@@ -23,6 +23,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 
+from .._collector import deferring_full_collections
+
 MODES = ("reverse", "forward")
 GRADIENT_MODES = ("auto", *MODES)
 # The largest parameter count for which `mode="auto"` takes forward mode (`gradient_mode`).
@@ -147,7 +149,9 @@ def gradient_function(
         return value
 
     if chosen == "reverse":
-        return jax.value_and_grad(scalar), x0
+        # Called while the caller's `jit` traces it: the transformation's whole trace
+        # (linearisation and transposition) with full garbage collections deferred.
+        return deferring_full_collections(jax.value_and_grad(scalar)), x0
 
     def value_twice(x):
         value = scalar(x)
@@ -155,6 +159,7 @@ def gradient_function(
 
     jacobian = jax.jacfwd(value_twice, has_aux=True)
 
+    @deferring_full_collections
     def g(x):
         grad, value = jacobian(x)
         return value, grad

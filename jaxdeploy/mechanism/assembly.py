@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _program_cache
+from .._collector import deferring_full_collections
 from .._validation import is_concrete
 from .saddle_point import least_change_correction
 from .system import Mechanism
@@ -160,6 +161,7 @@ def _check_rank(sv_max, sv_min, shape, what: str):
 
 
 @eqx.filter_jit
+@deferring_full_collections
 def _consistent_core(mechanism, q_guess, v_guess, t, fixed, fixed_velocities, tol):
     """Everything of `consistent_state` as one compiled program (op-by-op dispatch of the
     Gauss–Newton loop and the Jacobians would cost seconds of small compilations)."""
