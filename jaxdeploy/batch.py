@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._collector import full_collections_deferred
 from .mechanism import balance_metered, balance_metered_state, without_balance_meter
 from .scenes.base import Scene
 from .simulation import Trajectory, simulate
@@ -255,7 +256,9 @@ def batch_function(
     t_end, ts = jnp.asarray(t_end, dtype=float), jnp.asarray(ts, dtype=float)
 
     def call(values, t_end=t_end, ts=ts):
-        return program(values, jnp.asarray(t_end, dtype=float), jnp.asarray(ts, dtype=float))
+        # A first call traces, lowers and compiles: full garbage collections wait (`_collector`).
+        with full_collections_deferred():
+            return program(values, jnp.asarray(t_end, dtype=float), jnp.asarray(ts, dtype=float))
 
     return call
 
@@ -313,9 +316,10 @@ def simulate_batch(
         )
         trajectory = run(tuple(jnp.asarray(table[k]) for k in varied))
     else:  # identical cases: run once, broadcast
-        single = jax.jit(
-            lambda: run_scene(scene, shared, t_end, ts=ts, control=control, **simulate_options)
-        )()
+        with full_collections_deferred():
+            single = jax.jit(
+                lambda: run_scene(scene, shared, t_end, ts=ts, control=control, **simulate_options)
+            )()
         n = len(table[next(iter(table))])
         trajectory = jax.tree.map(
             lambda leaf: jnp.broadcast_to(leaf, (n, *jnp.shape(leaf))), single

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 
-from .._collector import deferring_full_collections
+from .._collector import deferring_full_collections, full_collections_deferred
 
 MODES = ("reverse", "forward")
 GRADIENT_MODES = ("auto", *MODES)
@@ -98,7 +98,8 @@ def parameter_jacobian(
 
     f, x0 = output_function(scene, params, wrt, output, t_end, mode=mode, **options)
     transform = jax.jacrev if mode == "reverse" else jax.jacfwd
-    return jax.jit(transform(f))(x0)
+    with full_collections_deferred():
+        return jax.jit(transform(f))(x0)
 
 
 def gradient_mode(n_parameters: int) -> str:
@@ -177,7 +178,8 @@ def parameter_gradient(
     import jax
 
     g, x0 = gradient_function(scene, params, wrt, loss, t_end, mode=mode, **options)
-    return jax.jit(g)(x0)
+    with full_collections_deferred():  # its lowering and compile too
+        return jax.jit(g)(x0)
 
 
 def gradient_at_tolerances(
