@@ -10,8 +10,8 @@ The names a user needs, in one place (the submodules behind them may move; these
 * build a mechanism: `Mechanism`, `Body`, the ideal joints `Revolute`, `Prismatic`, `Weld`,
   `AngleDriver`, the clearance joint `RevoluteClearance`, the force elements `Gravity`,
   `Spring`, `RotationalSpring`, `CoilSpringDrive`, `Latch`, `PreloadedLatch`, `AppliedForce`,
-  `AppliedTorque`, and `consistent_state` for the initial state; contact laws are in the
-  module `contact`;
+  `AppliedTorque`, and `consistent_state` for the initial state (`consistent_motion`: its
+  pose and velocities alone, a smaller program); contact laws are in the module `contact`;
 * the persistent caches: `enable_caches()` at the top of a script (or `JAXDEPLOY_CACHE_DIR`
   set before `import jaxdeploy`) keeps traced and compiled programs on disk, so a second
   process neither traces nor compiles what an earlier one did (the command line always does);
@@ -95,6 +95,7 @@ _EXPORTS = {
     "PreloadedLatch": "jaxdeploy.mechanism",
     "AppliedForce": "jaxdeploy.mechanism",
     "AppliedTorque": "jaxdeploy.mechanism",
+    "consistent_motion": "jaxdeploy.mechanism",
     "consistent_state": "jaxdeploy.mechanism",
     # outputs of a run beyond the saved states
     "metered": "jaxdeploy.mechanism",
@@ -130,6 +131,7 @@ __all__ = [  # = _EXPORTS + _MODULES + __version__ (tests/test_public_api.py che
     "__version__",
     "analysis",
     "clearance_joint_history",
+    "consistent_motion",
     "consistent_state",
     "contact",
     "energy_balance",
@@ -183,6 +185,7 @@ if TYPE_CHECKING:  # what the lazy names are, for type checkers and editors
         RotationalSpring,
         Spring,
         Weld,
+        consistent_motion,
         consistent_state,
         energy_balance,
         metered,

@@ -1,6 +1,6 @@
 """Planar multibody mechanisms: bodies, ideal joints, force elements, clearance joints."""
 
-from .assembly import AssemblyError, ConsistentState, consistent_state
+from .assembly import AssemblyError, ConsistentState, consistent_motion, consistent_state
 from .bodies import GROUND, Body, Kinematics
 from .clearance import RevoluteClearance
 from .element import AbstractElement, Wrench
@@ -66,6 +66,7 @@ __all__ = [
     "add_clock",
     "balance_metered",
     "balance_metered_state",
+    "consistent_motion",
     "consistent_state",
     "energy_balance",
     "energy_moved",

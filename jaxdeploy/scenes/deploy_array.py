@@ -33,6 +33,7 @@ from ..mechanism import (
     PreloadedLatch,
     Revolute,
     RevoluteClearance,
+    consistent_motion,
     consistent_state,
     contact_history,
     first_onset_times,
@@ -463,10 +464,10 @@ class DeployArray(Scene):
     def initial_state(self, params, mechanism):
         """Half deployed (α = 45°), at rest; journals centred (the ideal pose)."""
         q_guess = jnp.asarray(GEOMETRY["initial_state"]["q"], dtype=float)
-        ideal = consistent_state(mechanism.idealized(), q_guess, fixed=(2,))
         if not self.clearance_joints:
-            return ideal
-        return consistent_state(mechanism, ideal.q, ideal.v)
+            return consistent_state(mechanism.idealized(), q_guess, fixed=(2,))
+        q, v = consistent_motion(mechanism.idealized(), q_guess, fixed=(2,))
+        return consistent_state(mechanism, q, v)
 
     def channels(self, mechanism, trajectory):
         """Base channels plus `alpha` (deployment angle, rad); each panel's tip position

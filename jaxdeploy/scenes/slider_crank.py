@@ -30,6 +30,7 @@ from ..mechanism import (
     Prismatic,
     Revolute,
     RevoluteClearance,
+    consistent_motion,
     consistent_state,
     first_onset_times,
     onset_counts,
@@ -236,10 +237,10 @@ class SliderCrank(Scene):
             [0.5 * r, 0.0, 0.0, r + 0.5 * ell, 0.0, 0.0, r + ell, 0.0, 0.0], dtype=float
         )
         ideal = mechanism.idealized()
-        state = consistent_state(ideal, q_guess)
         if mechanism.n_constraints == ideal.n_constraints:  # already ideal
-            return state
-        return consistent_state(mechanism, state.q, state.v)
+            return consistent_state(ideal, q_guess)
+        q, v = consistent_motion(ideal, q_guess)
+        return consistent_state(mechanism, q, v)
 
 
 def ideal_slider_kinematics(crank_length, rod_length, crank_speed, t):
