@@ -681,7 +681,10 @@ SIMULATE_PHASES = {
     "start_up_s": "interpreter, imports, arguments (the wall before the phases began)",
     "build_s": "scene build and initial state (its assembly programs compiled or loaded; warm: "
     "read back from the scene cache)",
-    "compile_s": "tracing, lowering and compiling the run's program (cold) or loading it (warm)",
+    "compile_s": "tracing, lowering and compiling the run's program, or loading it (warm); cold: "
+    "what the run still waits for of its program compiled ahead",
+    "compile_ahead_s": "the run's program traced and compiled in a second thread while the "
+    "initial state is assembled (cold: overlaps build)",
     "integrate_s": "the run, and beside it the contact-history programs",
     "reference_compile_s": "the reference run's compile, in a second thread beside the run",
     "reference_s": "the reference run, in that thread (cold; warm: read from its cache)",

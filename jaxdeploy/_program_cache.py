@@ -192,7 +192,6 @@ def equinox_on_error() -> str:
 
 def key(fn, args) -> str | None:
     """The store's key of `fn(*args)` (see the module docstring), or None if uncacheable."""
-    import equinox as eqx
     import jax
 
     on_error = equinox_on_error()
@@ -206,9 +205,9 @@ def key(fn, args) -> str | None:
     for leaf in leaves:
         if isinstance(leaf, jax.core.Tracer):
             return None  # under jit/vmap/grad: the caller's trace owns this call
-        if eqx.is_array(leaf):
-            aval = jax.typeof(leaf)
-            described.append(["array", list(aval.shape), str(aval.dtype), aval.weak_type])
+        if _is_array(leaf):
+            shape, dtype, weak = _aval(leaf)
+            described.append(["array", list(shape), str(dtype), weak])
             continue
         description = _leaf_key(leaf)
         if description is None:
@@ -228,24 +227,103 @@ def key(fn, args) -> str | None:
 def call(fn, *args):
     """`fn(*args)` (`fn` an `equinox.filter_jit` function), through the store when it is on
     and the call is cacheable (module docstring). Full garbage collections wait while it
-    traces, lowers and compiles (`_collector`)."""
+    traces, lowers and compiles (`_collector`). Inside `ahead_of_time()`, the program is made
+    ready and `ProgramReady` is raised instead of running it."""
     from ._collector import full_collections_deferred
 
     with full_collections_deferred():
         return _call(fn, *args)
 
 
-def _call(fn, *args):
+class ProgramReady(Exception):
+    """Raised by `call` inside `ahead_of_time()` once the call's program is traced (or read
+    back) and compiled: it unwinds the caller (e.g. `simulate`) before anything runs."""
+
+    def __init__(self, ready: bool):
+        super().__init__("program ready" if ready else "program not cacheable")
+        self.ready = ready
+
+
+@contextmanager
+def ahead_of_time():
+    """Within this block (in this thread), `call` makes its program ready without running
+    it: it computes the entry's key, reads the entry back or traces and stores it, compiles
+    (or loads) its executable and raises `ProgramReady` (`.ready`: False when the call is not
+    cacheable, which makes nothing). Array arguments may be `jax.ShapeDtypeStruct`s: only
+    their shapes, dtypes and weak types enter the key and the trace. A later `call` with
+    arrays of those shapes, in any thread, then runs the program at once; one that comes
+    while it is being made waits for it (one lock per key) instead of making it again.
+
+    For a command that knows its run's shapes before its initial state exists: the run's
+    compile then overlaps the assembly's (`jaxdeploy simulate`, `commands/simulate.py`)."""
+    previous = getattr(_hook, "ahead", False)
+    _hook.ahead = True
+    try:
+        yield
+    finally:
+        _hook.ahead = previous
+
+
+_key_locks: dict[str, threading.Lock] = {}
+_key_locks_guard = threading.Lock()
+
+
+def _key_lock(cache_key: str) -> threading.Lock:
+    with _key_locks_guard:
+        return _key_locks.setdefault(cache_key, threading.Lock())
+
+
+def _is_array(x) -> bool:
+    """An array leaf of a call's arguments: an array, or its shape alone (`ahead_of_time`)."""
     import equinox as eqx
     import jax
 
+    return eqx.is_array(x) or isinstance(x, jax.ShapeDtypeStruct)
+
+
+def _aval(x):
+    """`(shape, dtype, weak_type)` of an array leaf (`_is_array`)."""
+    import jax
+
+    if isinstance(x, jax.ShapeDtypeStruct):
+        return x.shape, x.dtype, bool(x.weak_type)
+    aval = jax.typeof(x)
+    return aval.shape, aval.dtype, aval.weak_type
+
+
+def _call(fn, *args):
+    import jax
+
+    ahead = getattr(_hook, "ahead", False)
     where = _folder
     cache_key = None if where is None else key(fn, args)
-    if cache_key is None:
-        return fn(*args)
-    if not folder_is_private(where, "program cache"):
+    if cache_key is None or not folder_is_private(where, "program cache"):
+        if ahead:
+            raise ProgramReady(False)
         return fn(*args)
     path = os.path.join(where, f"{cache_key}.jaxexport")
+    arrays = [x for x in jax.tree.leaves(args) if _is_array(x)]
+    with _key_lock(cache_key):
+        entry = _entry(fn, args, cache_key, path)
+    if entry is None:
+        if ahead:
+            raise ProgramReady(False)
+        return fn(*args)
+    if ahead:
+        with _key_lock(cache_key):
+            _executable(cache_key, path, entry[0], arrays)
+        raise ProgramReady(True)
+    _traced()
+    exported, skeleton = entry
+    with _key_lock(cache_key):
+        executable = _executable(cache_key, path, exported, arrays)
+    results = iter(executable(*arrays))
+    return jax.tree.map(lambda leaf: next(results) if leaf is _ARRAY else leaf, skeleton)
+
+
+def _entry(fn, args, cache_key, path):
+    """`(exported, skeleton)` of the store's entry for `fn(*args)`: this process's, else read
+    from `path`, else traced, exported and stored there; None when JAX cannot export it."""
     # Read once per process: the same `Exported` object reuses its compiled executable, where
     # a new one read from the disk would be compiled again (a fit or a sweep calls again).
     entry = _loaded.get(cache_key) or _load(path, cache_key)
@@ -253,7 +331,7 @@ def _call(fn, *args):
         payload = None if cache_key in _unexportable else _export(fn, args, cache_key)
         if payload is None:
             _unexportable.add(cache_key)  # not tried again in this process
-            return fn(*args)
+            return None
         _store(path, payload)
         # An executable kept beside an entry that was missing or discarded belongs to the
         # program that was there before: compile the new one afresh.
@@ -266,11 +344,7 @@ def _call(fn, *args):
         # (and so miss the keys of the programs they flow into).
         entry = _decode(payload)
     _loaded[cache_key] = entry
-    _traced()
-    exported, skeleton = entry
-    arrays = [x for x in jax.tree.leaves(args) if eqx.is_array(x)]
-    results = iter(_executable(cache_key, path, exported, arrays)(*arrays))
-    return jax.tree.map(lambda leaf: next(results) if leaf is _ARRAY else leaf, skeleton)
+    return entry
 
 
 def _executable(cache_key, path, exported, arrays):
@@ -505,16 +579,13 @@ def _export(fn, args, cache_key: str) -> bytes | None:
     import jax
 
     leaves, treedef = jax.tree.flatten(args)
-    shapes = [
-        jax.ShapeDtypeStruct(x.shape, x.dtype, weak_type=jax.typeof(x).weak_type)
-        for x in leaves
-        if eqx.is_array(x)
-    ]
+    avals = [_aval(x) for x in leaves if _is_array(x)]
+    shapes = [jax.ShapeDtypeStruct(shape, dtype, weak_type=weak) for shape, dtype, weak in avals]
     output = {}
 
     def flat(*arrays):
         given = iter(arrays)
-        full = [next(given) if eqx.is_array(x) else x for x in leaves]
+        full = [next(given) if _is_array(x) else x for x in leaves]
         out_leaves, out_treedef = jax.tree.flatten(fn(*jax.tree.unflatten(treedef, full)))
         # The output with each array replaced by a mark, stored by pickling the objects
         # themselves (a pickled tree structure loses equinox's sentinels).

@@ -326,3 +326,140 @@ def test_the_energy_meters_initial_state_is_a_stored_program(store):
     for run in (first, again):
         for got, want in zip(jax.tree.leaves(run.initial), jax.tree.leaves(expected), strict=True):
             np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+
+
+_traces = []
+jax.monitoring.register_event_duration_secs_listener(
+    lambda event, duration, **kw: (
+        _traces.append(kw.get("fun_name"))
+        if event == "/jax/core/compile/jaxpr_trace_duration"
+        else None
+    )
+)
+
+
+def _exported_traces(name="exported__toy"):
+    return sum(1 for n in _traces if n == name)
+
+
+def test_ahead_of_time_makes_the_program_from_shapes_and_a_later_call_only_runs_it(store):
+    """`ahead_of_time`: from `ShapeDtypeStruct`s alone the program is traced, stored and
+    compiled, and nothing runs (`ProgramReady`); the call with real arrays then neither
+    traces nor compiles, and gives `fn`'s result bit for bit."""
+    x = jnp.linspace(0.1, 2.0, 6)
+    shape = jax.ShapeDtypeStruct(x.shape, x.dtype)
+    assert _program_cache.key(_toy, (shape, 1.5, 3)) == _program_cache.key(_toy, (x, 1.5, 3))
+    traced = _exported_traces()
+    with _program_cache.ahead_of_time(), pytest.raises(_program_cache.ProgramReady) as made:
+        _program_cache.call(_toy, shape, 1.5, 3)
+    assert made.value.ready
+    assert _exported_traces() == traced + 1 and len(_entries(store)) == 1
+    compiles = len(_compiles)
+    out = _program_cache.call(_toy, x, 1.5, 3)
+    assert _exported_traces() == traced + 1 and len(_compiles) == compiles
+    np.testing.assert_array_equal(np.asarray(out["y"]), np.asarray(_toy(x, 1.5, 3)["y"]))
+    # A weak-typed shape is another program (the key says so), made separately.
+    weak = jax.ShapeDtypeStruct(x.shape, x.dtype, weak_type=True)
+    assert _program_cache.key(_toy, (weak, 1.5, 3)) != _program_cache.key(_toy, (x, 1.5, 3))
+
+
+def test_ahead_of_time_makes_nothing_when_the_call_is_not_cacheable(store):
+    shape = jax.ShapeDtypeStruct((4,), jnp.float64)
+    _program_cache.enable(None)
+    with _program_cache.ahead_of_time(), pytest.raises(_program_cache.ProgramReady) as made:
+        _program_cache.call(_toy, shape, 1.5, 3)
+    assert not made.value.ready
+
+
+def test_a_call_while_its_program_is_made_ahead_waits_for_it(store, monkeypatch):
+    """A call that comes while another thread makes the same program ahead waits for it (one
+    lock per program) instead of tracing it a second time."""
+    import threading
+
+    x = jnp.linspace(0.1, 2.0, 9)
+    exporting, release = threading.Event(), threading.Event()
+    export = _program_cache._export
+
+    def slow_export(fn, args, cache_key):
+        exporting.set()
+        release.wait(30)
+        return export(fn, args, cache_key)
+
+    monkeypatch.setattr(_program_cache, "_export", slow_export)
+
+    def ahead():
+        with _program_cache.ahead_of_time():
+            try:
+                _program_cache.call(_toy, jax.ShapeDtypeStruct(x.shape, x.dtype), 0.5, 2)
+            except _program_cache.ProgramReady:
+                pass
+
+    traced = _exported_traces()
+    thread = threading.Thread(target=ahead)
+    thread.start()
+    assert exporting.wait(30)
+    threading.Timer(0.2, release.set).start()
+    out = _program_cache.call(_toy, x, 0.5, 2)  # blocks until the ahead thread is done
+    thread.join()
+    assert _exported_traces() == traced + 1
+    np.testing.assert_array_equal(np.asarray(out["y"]), np.asarray(_toy(x, 0.5, 2)["y"]))
+
+
+# `jaxdeploy simulate` in a fresh process with an empty cache folder, its traces counted:
+# with the run's program compiled ahead (beside the assembly), or with that turned off.
+_SIMULATE_COMMAND = """
+import json, sys
+import jax
+
+traces = []
+jax.monitoring.register_event_duration_secs_listener(
+    lambda event, duration, **kw: traces.append(kw.get("fun_name"))
+    if event == "/jax/core/compile/jaxpr_trace_duration" else None
+)
+from jaxdeploy.cli import main
+from jaxdeploy.commands import _ahead
+
+if sys.argv[1] == "off":
+    _ahead.CompileAhead.start = lambda self, mechanism: None
+code = main(["simulate", *sys.argv[3:], "--quiet", "--out", sys.argv[2]])
+print(json.dumps({"code": code, "solve_traces": traces.count("exported__solve")}))
+"""
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["pendulum"],  # with the energy meter
+        # a clearance joint (its events and episodes), no meter (a driven crank)
+        pytest.param(["slider_crank", "--t-end", "0.002"], marks=pytest.mark.slow),
+    ],
+)
+def test_simulate_compiles_its_run_ahead_once_and_runs_it_unchanged(tmp_path, command):
+    """The command compiles the run's program beside the assembly (commands/_ahead.py):
+    summary.json reports that thread's time, the run's program is traced once in the
+    process (the run reads what was made ahead), and the run's files are bit for bit those
+    of the command with the compile ahead turned off."""
+    import json
+
+    results = {}
+    for mode in ("on", "off"):
+        env = {**os.environ, "JAX_PLATFORMS": "cpu",
+               "JAXDEPLOY_CACHE_DIR": str(tmp_path / f"cache-{mode}")}  # fmt: skip
+        out = tmp_path / f"out-{mode}"
+        done = subprocess.run(
+            [sys.executable, "-c", textwrap.dedent(_SIMULATE_COMMAND), mode, str(out), *command],
+            env=env,
+            capture_output=True,
+            text=True,
+        )
+        assert done.returncode == 0, done.stderr[-3000:]
+        report = json.loads(done.stdout.strip().splitlines()[-1])
+        assert report["code"] == 0
+        assert report["solve_traces"] == 1, report
+        results[mode] = (out, json.loads((out / "summary.json").read_text()))
+    (on, summary_on), (off, summary_off) = results["on"], results["off"]
+    assert summary_on["phases"]["compile_ahead_s"] > 0
+    assert "compile_ahead_s" not in summary_off["phases"]
+    assert (on / "trajectory.npz").read_bytes() == (off / "trajectory.npz").read_bytes()
+    for name in ("status", "n_steps", "n_rejected"):
+        assert summary_on[name] == summary_off[name]

@@ -32,7 +32,10 @@ SUMMARY_KEYS = (
         "s",
         "wall time of each phase: build_s (mechanism, initial state; read back from the "
         "scene cache when an earlier run built the same scene and parameters), compile_s (of the "
-        "run), integrate_s, reference_compile_s and reference_s (the ideal-joint reference "
+        "run; after a fresh build, what the run still waits for of its program compiled "
+        "ahead), compile_ahead_s (that compile: the run's program traced and compiled in a "
+        "second thread while the initial state is assembled, overlapping build_s), "
+        "integrate_s, reference_compile_s and reference_s (the ideal-joint reference "
         "run, deploy_array without --no-reference, made in a second thread beside the run: "
         "they overlap compile_s and integrate_s), reference_wait_s (waiting for it after the "
         "run), outputs_s (summary quantities, trajectory.npz; the figures are drawn meanwhile "

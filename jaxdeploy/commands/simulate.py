@@ -180,17 +180,30 @@ def _start_figures(scene):
 
 
 def _build_and_run(args, scene, params, control, t_end, out, drawing) -> int:
-    """build → plan → probe → run and write, the figures drawn by `drawing`."""
-    from ..mechanism import AssemblyError
-    from . import _plan
+    """build (the run's program compiled beside it: `_ahead`) → plan → probe → run and
+    write, the figures drawn by `drawing`."""
+    from ._ahead import CompileAhead
     from ._phases import Phases
 
     phases = Phases(quiet=args.quiet)
+    # The run's program, compiled beside the assembly once the mechanism is built; joined on
+    # every way out (a process that ends while XLA compiles in a thread aborts).
+    ahead = CompileAhead(t_end, args.n_save, control)
+    try:
+        return _build_then_run(args, scene, params, control, t_end, out, drawing, phases, ahead)
+    finally:
+        ahead.wait()
+
+
+def _build_then_run(args, scene, params, control, t_end, out, drawing, phases, ahead) -> int:
+    from ..mechanism import AssemblyError
+    from . import _plan
+
     try:
         with phases.phase(
             "build", f"{scene.name}: build the mechanism, assemble the initial state"
         ):
-            mechanism, initial = _build(args, scene, params, control, phases)
+            mechanism, initial = _build(args, scene, params, control, phases, ahead)
     except _Refused as refused:
         return refuse(str(refused))
     except (ValueError, AssemblyError) as err:
@@ -202,6 +215,14 @@ def _build_and_run(args, scene, params, control, t_end, out, drawing) -> int:
     with folder:
         beside = _reference_beside(args, scene, params, t_end, phases)
         run = _metered(mechanism, initial)
+        if beside is not None and ahead.started:
+            # The run's program is traced or being compiled beside: the reference's trace
+            # can take its turn now, while XLA compiles (as it does after the run's trace).
+            beside.start()
+        # What the run still waits for of its program compiled ahead is its compile.
+        phases.add("compile_s", ahead.wait())
+        if ahead.seconds:
+            phases.add("compile_ahead_s", ahead.seconds)
         try:
             length = _probe(args, scene, params, control, t_end, run, phases, beside)
         except _Refused as refused:
@@ -337,11 +358,12 @@ class _Refused(ValueError):
     """A refusal of the plan (its message is the whole line)."""
 
 
-def _build(args, scene, params, control, phases):
+def _build(args, scene, params, control, phases, ahead):
     """`(mechanism, initial_state)` of the run: read back from the scene cache when an
     earlier run built the same scene with the same parameters (`_scene_cache`), else built,
-    planned (before the assembly compiles its Newton iteration) and assembled. The plan is
-    checked on a cached mechanism too: it depends on the command's other flags."""
+    planned (before the assembly compiles its Newton iteration) and assembled, the run's
+    program compiled `ahead` meanwhile. The plan is checked on a cached mechanism too: it
+    depends on the command's other flags."""
     from ..mechanism import balance_metered
     from . import _plan, _scene_cache
 
@@ -352,6 +374,7 @@ def _build(args, scene, params, control, phases):
             _plan_run(args, scene, mechanism, control, facts["memory_floats"])
         except ValueError as err:
             raise _Refused(str(err)) from None
+        ahead.start(balance_metered(mechanism) or mechanism)  # the mechanism that runs
         return scene.initial_state(params, mechanism), facts
 
     mechanism, initial, facts, source = _scene_cache.built(

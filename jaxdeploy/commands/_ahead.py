@@ -1,0 +1,98 @@
+"""The run's program compiled ahead, in a second thread, while the command assembles the
+initial state (`jaxdeploy simulate`).
+
+The run's program depends on the initial state's shapes, not its values, and those follow
+from the built mechanism alone (`abstract_state`). So once the mechanism is built, a thread
+calls `simulate` with that abstract state inside `_program_cache.ahead_of_time()`: the
+program is traced, stored and compiled while the main thread traces, compiles and runs the
+assembly, and the run's own call then finds it ready (or waits for it: one lock per
+program). XLA's compile and the waits for it leave Python's GIL free, so on two cores the
+two compiles overlap; the traces still take turns.
+
+Nothing is made ahead when the program cache is off (a plain `jit` call could not find the
+program again), or when the step control would warn (`solver_advice`): the warning is the
+run's to give, once.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+
+def abstract_state(mechanism):
+    """The `ConsistentState` `mechanism`'s initial state will have, as shapes and dtypes
+    (`jax.ShapeDtypeStruct`): q, q̇, q̈ of its coordinates, λ of its constraints and the memory
+    `Mechanism.init_memory` gives. Weak types dropped, as they are from the program cache's
+    outputs, which the command's initial state is."""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    from ..mechanism import ConsistentState
+
+    coordinates = jax.ShapeDtypeStruct((mechanism.n_coordinates,), jnp.float64)
+
+    def state(q, v):
+        lam = jnp.zeros((mechanism.n_constraints,), q.dtype)
+        return ConsistentState(q, v, q, lam, mechanism.init_memory(q, v))
+
+    shapes = eqx.filter_eval_shape(state, coordinates, coordinates)
+    return jax.tree.map(lambda s: jax.ShapeDtypeStruct(s.shape, s.dtype), shapes)
+
+
+class CompileAhead:
+    """`start(mechanism)` begins compiling the program `simulate(mechanism, initial, t_end,
+    n_save=n_save, control=control)` will run, in a daemon thread; `wait()` joins it and
+    returns how long the caller waited [s]. Errors stay in the thread: the run's own call
+    raises them again where they belong. `seconds`: the thread's wall time; `ready`: whether
+    it left the program compiled."""
+
+    def __init__(self, t_end: float, n_save: int, control):
+        self.t_end, self.n_save, self.control = t_end, n_save, control
+        self._thread: threading.Thread | None = None
+        self.seconds = 0.0
+        self.ready = False
+        self.error: BaseException | None = None
+
+    def start(self, mechanism) -> None:
+        from .. import _program_cache
+        from ..solvers import solver_advice
+
+        if self._thread is not None or _program_cache.folder() is None:
+            return
+        if solver_advice(mechanism, self.control) is not None:
+            return
+        self._thread = threading.Thread(
+            target=self._make, args=(mechanism,), name="compile-ahead", daemon=True
+        )
+        self._thread.start()
+
+    def _make(self, mechanism) -> None:
+        from .. import _program_cache
+        from ..simulation import simulate
+
+        began = time.time()
+        try:
+            initial = abstract_state(mechanism)
+            with _program_cache.ahead_of_time():
+                simulate(mechanism, initial, self.t_end, n_save=self.n_save, control=self.control)
+        except _program_cache.ProgramReady as made:
+            self.ready = made.ready
+        except BaseException as err:  # noqa: BLE001 - the run's own call raises it again
+            self.error = err
+        finally:
+            self.seconds = time.time() - began
+
+    @property
+    def started(self) -> bool:
+        return self._thread is not None
+
+    def wait(self) -> float:
+        """Join the thread (a process must not end while it compiles: XLA aborts); the wall
+        time [s] this call waited."""
+        if self._thread is None:
+            return 0.0
+        began = time.time()
+        self._thread.join()
+        return time.time() - began
