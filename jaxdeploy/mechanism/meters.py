@@ -171,12 +171,13 @@ class EnergyMeter(AbstractElement):
             # Nothing changes between steps: the step's starting force (at this state, with
             # this memory) was computed at the end of the step before (`after_step`).
             return {**memory, "q_start": kin.q}
+        force, jump = self.step_start(kin, memory["inner"], inner)
         return {
             "inner": inner,
             "q_start": kin.q,
-            "force_start": self._nonconservative_force(kin, inner),
+            "force_start": force,
             "dissipated": memory["dissipated"],
-            "injected": memory["injected"] + self._jump(kin, memory["inner"], inner),
+            "injected": memory["injected"] + jump,
         }
 
     def after_step(self, memory, kin: Kinematics, inner):
@@ -187,20 +188,36 @@ class EnergyMeter(AbstractElement):
         step's ending force in one evaluation vectorised over the two memories (what does not
         depend on the memory — the kinematics, the contact geometry — is then traced and
         compiled once, not twice)."""
-        step_memory = memory["inner"]
-        if self._memory_kept_for_step:
-            force_end, force_next = self._forces_with(kin, step_memory, inner)
-        else:
-            force_end = self._nonconservative_force(kin, step_memory)
-            force_next = memory["force_start"]
-        work = 0.5 * jnp.dot(memory["force_start"] + force_end, kin.q - memory["q_start"])
+        work, force_next, jump = self.step_end(
+            kin, memory["q_start"], memory["force_start"], memory["inner"], inner
+        )
         return {
             "inner": inner,
             "q_start": memory["q_start"],
             "force_start": force_next,
             "dissipated": memory["dissipated"] - work,
-            "injected": memory["injected"] + self._jump(kin, step_memory, inner),
+            "injected": memory["injected"] + jump,
         }
+
+    def step_start(self, kin: Kinematics, before, inner):
+        """`(force_start, jump)` of a step that starts at `kin` after the inner element's
+        memory changed from `before` to `inner` between steps (`_memory_kept_for_step`
+        False): the step's starting non-conservative force and `_jump`."""
+        return self._nonconservative_force(kin, inner), self._jump(kin, before, inner)
+
+    def step_end(self, kin: Kinematics, q_start, force_start, step_memory, inner):
+        """`(work, force_next, jump)` at the end `kin` of a step from `q_start` whose starting
+        force was `force_start`, taken with the inner memory `step_memory` and left with
+        `inner`: the trapezoidal work `½ (Q_start + Q_end)·(q − q_start)` of the
+        non-conservative force, the next step's starting force (when the memory is kept
+        between steps; else `force_start` back, `for_step` computes it) and `_jump`."""
+        if self._memory_kept_for_step:
+            force_end, force_next = self._forces_with(kin, step_memory, inner)
+        else:
+            force_end = self._nonconservative_force(kin, step_memory)
+            force_next = force_start
+        work = 0.5 * jnp.dot(force_start + force_end, kin.q - q_start)
+        return work, force_next, self._jump(kin, step_memory, inner)
 
     def _forces_with(self, kin: Kinematics, first, second):
         """`_nonconservative_force` at `kin` with the inner memories `first` and `second`."""
@@ -239,15 +256,19 @@ def metered(mechanism: Mechanism) -> Mechanism:
 class BalanceMeter(AbstractElement):
     """The energy meters of a mechanism's force elements, beside them: the elements stay as
     they are (a clearance joint stays a `RevoluteClearance`, its contact episodes and extremes
-    logged as before) and this element keeps an `EnergyMeter` of each, whose memory it
-    updates from the same states. It adds no force, no constraint, no event and no coupling,
-    so the run steps exactly as without it. See `balance_metered`.
+    logged as before) and this element keeps an `EnergyMeter`'s bookkeeping of each, updated
+    from the same states. It adds no force, no constraint, no event and no coupling, so the
+    run steps exactly as without it. See `balance_metered`.
 
-    Each meter's copy of its element's memory (`"inner"`) is the element's own, handed over
-    by the mechanism after it updated it (`reads_memories`), not updated a second time: the
-    meter's part of a step is then the forces and potentials it meters alone (a second
-    clearance-joint update, a root search on the step's interpolant, had doubled the size of
-    deploy_array's compiled run).
+    The metered elements' memories are the mechanism's, handed over before and after it
+    updated them (`reads_memories`), not updated a second time (a second clearance-joint
+    update, a root search on the step's interpolant, had doubled the size of deploy_array's
+    compiled run) nor kept a second time: the meter's memory is four arrays over the k
+    meters, `q_start` (n,) the step's starting positions, `force_start` (k, n) each meter's
+    starting non-conservative force, `dissipated` (k,) and `injected` (k,). (A copy of each
+    element's memory and positions per meter, 52 arrays carried through deploy_array's loop,
+    were a fifth of its compiled run; `metered_balance` reads the elements' memories from
+    the mechanism's.)
 
     **Arguments:** `meters`: an `EnergyMeter` per metered element; `indices`: each metered
     element's index in the mechanism.
@@ -265,22 +286,52 @@ class BalanceMeter(AbstractElement):
         return ()
 
     def init_memory(self, kin: Kinematics):
-        return tuple(m.init_memory(kin) for m in self.meters)
+        starts = [m.init_memory(kin) for m in self.meters]
+        return {
+            "q_start": kin.q,
+            "force_start": _stacked([s["force_start"] for s in starts], kin.q),
+            "dissipated": _stacked([s["dissipated"] for s in starts], kin.q[:0]),
+            "injected": _stacked([s["injected"] for s in starts], kin.q[:0]),
+        }
 
-    def memory_for_step_beside(self, memory, kin: Kinematics, updated):
-        """`memory_for_step`, the metered elements' memories for the step in `updated` (the
-        mechanism's, by element index)."""
-        return tuple(
-            m.for_step(x, kin, updated[i])
-            for m, x, i in zip(self.meters, memory, self.indices, strict=True)
-        )
+    def memory_for_step_beside(self, memory, kin: Kinematics, updated, before):
+        """`memory_for_step`, the metered elements' memories for the step in `updated` and
+        before this call in `before` (the mechanism's, by element index)."""
+        forces, jumps = [], []
+        for j, (meter, i) in enumerate(zip(self.meters, self.indices, strict=True)):
+            if meter._memory_kept_for_step:
+                # Nothing changes between steps: the starting force was computed at the end
+                # of the step before (`memory_after_step_beside`).
+                forces.append(memory["force_start"][j])
+                jumps.append(None)
+            else:
+                force, jump = meter.step_start(kin, before[i], updated[i])
+                forces.append(force)
+                jumps.append(jump)
+        return {
+            "q_start": kin.q,
+            "force_start": _stacked(forces, kin.q),
+            "dissipated": memory["dissipated"],
+            "injected": _add_where_given(memory["injected"], jumps),
+        }
 
-    def memory_after_step_beside(self, memory, kin: Kinematics, step, updated):
-        """`memory_after_step`, the metered elements' memories after the step in `updated`."""
-        return tuple(
-            m.after_step(x, kin, updated[i])
-            for m, x, i in zip(self.meters, memory, self.indices, strict=True)
-        )
+    def memory_after_step_beside(self, memory, kin: Kinematics, step, updated, before):
+        """`memory_after_step`, the metered elements' memories after the step in `updated`
+        and during it in `before`."""
+        works, forces, jumps = [], [], []
+        for j, (meter, i) in enumerate(zip(self.meters, self.indices, strict=True)):
+            work, force, jump = meter.step_end(
+                kin, memory["q_start"], memory["force_start"][j], before[i], updated[i]
+            )
+            works.append(work)
+            forces.append(force)
+            jumps.append(jump)
+        return {
+            "q_start": memory["q_start"],
+            "force_start": _stacked(forces, kin.q),
+            "dissipated": memory["dissipated"] - _stacked(works, kin.q[:0]),
+            "injected": memory["injected"] + _stacked(jumps, kin.q[:0]),
+        }
 
     def switched(self, before, after):
         # The metered elements' own switches are seen where they are, in the mechanism.
@@ -291,6 +342,37 @@ class BalanceMeter(AbstractElement):
         kept = [(m.idealized(), i) for m, i in zip(self.meters, self.indices, strict=True)]
         kept = [(m, i) for m, i in kept if isinstance(m, EnergyMeter)]
         return BalanceMeter(tuple(m for m, _ in kept), tuple(i for _, i in kept))
+
+    def meter_memories(self, memory, elements_memory) -> tuple:
+        """Each meter's memory as an `EnergyMeter`'s (`inner` from `elements_memory`, the
+        mechanism's memory by element index), from this element's `memory`; leading axes
+        (saved states) kept."""
+        return tuple(
+            {
+                "inner": elements_memory[i],
+                "q_start": memory["q_start"],
+                "force_start": memory["force_start"][..., j, :],
+                "dissipated": memory["dissipated"][..., j],
+                "injected": memory["injected"][..., j],
+            }
+            for j, i in enumerate(self.indices)
+        )
+
+
+def _stacked(values, like):
+    """`values` (arrays of one shape) stacked on a new first axis; with none, an empty array
+    of `like`'s trailing shape."""
+    if not values:
+        return jnp.zeros((0, *like.shape), dtype=like.dtype)
+    return jnp.stack(values)
+
+
+def _add_where_given(total, jumps):
+    """`total` (k,) plus each given jump at its position (None: nothing added there, so the
+    entry stays bit for bit what it was)."""
+    if all(jump is None for jump in jumps):
+        return total
+    return jnp.stack([total[j] if d is None else total[j] + d for j, d in enumerate(jumps)])
 
 
 def balance_metered(mechanism: Mechanism) -> Mechanism | None:
@@ -337,7 +419,14 @@ def metered_balance(mechanism: Mechanism, q, v, memory) -> dict:
     alone = Mechanism(mechanism.bodies, meter.meters, mechanism.ground_points)
     # Through the program cache when it is on: a warm `jaxdeploy simulate` reads the
     # program back instead of tracing it.
-    return _program_cache.call(energy_balance, alone, q, v, memory[-1])
+    return _program_cache.call(_metered_energy_balance, alone, meter, q, v, memory)
+
+
+@eqx.filter_jit
+def _metered_energy_balance(alone: Mechanism, meter: BalanceMeter, q, v, memory) -> dict:
+    """`energy_balance` of the meters `alone`, their memories from the `BalanceMeter`'s and
+    the mechanism's saved `memory` (`BalanceMeter.meter_memories`)."""
+    return energy_balance(alone, q, v, meter.meter_memories(memory[-1], memory))
 
 
 class StepClock(AbstractElement):

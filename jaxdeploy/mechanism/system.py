@@ -253,7 +253,7 @@ class Mechanism(eqx.Module):
         ]
         for i, e in enumerate(self.elements):
             if e.reads_memories and instruments:
-                updated[i] = e.memory_for_step_beside(memory[i], kin, tuple(updated))
+                updated[i] = e.memory_for_step_beside(memory[i], kin, tuple(updated), memory)
         return tuple(updated)
 
     @traced_once
@@ -266,7 +266,9 @@ class Mechanism(eqx.Module):
         ]
         for i, e in enumerate(self.elements):
             if e.reads_memories:
-                updated[i] = e.memory_after_step_beside(memory[i], kin, step, tuple(updated))
+                updated[i] = e.memory_after_step_beside(
+                    memory[i], kin, step, tuple(updated), memory
+                )
         return tuple(updated)
 
     def event_fraction(self, memory):
