@@ -59,7 +59,9 @@ def _part(name: str, quick: bool) -> dict:
 
         return andrews(quick=quick, repeats=1 if quick else 3)
     if name == "batch":
-        return targets.batch(cases=16 if quick else 256, singles=2 if quick else 8)
+        return targets.batch(
+            cases=16 if quick else 256, singles=2 if quick else 8, shared_cases=4 if quick else 64
+        )
     if name == "ceiling":
         return targets.solve_ceiling(cases=16 if quick else 256, iterations=200 if quick else 2000)
     if name == "gradient":

@@ -35,6 +35,23 @@ def _batch_bounds(b: dict) -> str:
             "the case with the most saved times in that step, each an acceleration solve for "
             "every case."
         )
+    sh = b.get("shared_steps")
+    if sh:
+        lo, hi = sh["vmap_accepted_steps_min_max"]
+        parts.append(
+            f"With every case on one shared step sequence (`benchmarks/shared_steps.py`: a step "
+            f"is kept when every case keeps it, the next is the shortest any case proposes; "
+            f"{sh['cases']} cases of the same spread) the vmap has no idle lanes, but each case "
+            f"takes every other case's steps: {sh['shared_accepted_steps']} accepted and "
+            f"{sh['shared_rejected_steps']} rejected steps against {lo}–{hi} accepted per case "
+            f"(mean {sh['vmap_accepted_steps_mean']:.0f}) in the plain vmap, "
+            f"{sh['shared_per_simulation_s']:.3g} s per simulation against "
+            f"{sh['vmap_per_simulation_s']:.3g} s ({sh['ratio']:.1f}× the plain vmap's cost; "
+            "compile "
+            f"{sh['shared_compile_s']:.3g} s against {sh['vmap_compile_s']:.3g} s): each "
+            "case's contact onsets and located events become steps of all, so sharing steps "
+            "does not pay for a mechanism with impacts."
+        )
     return " ".join(parts) + (" " if parts else "")
 
 

@@ -24,7 +24,7 @@ def _timed(fn, *args):
     return time.perf_counter() - start, out
 
 
-def batch(cases: int = 256, singles: int = 8, t_end: float = 4e-3) -> dict:
+def batch(cases: int = 256, singles: int = 8, t_end: float = 4e-3, shared_cases: int = 64) -> dict:
     """Per-simulation cost of slider_crank (the scene's default step control) as one vmap of
     `cases` cases against one at a time (`singles` of them, the mean), restitution spread over
     0.8–0.99. Run in a process pinned to one core, so both use the same hardware.
@@ -32,7 +32,9 @@ def batch(cases: int = 256, singles: int = 8, t_end: float = 4e-3) -> dict:
     Twice: with the default outputs (q, q̇, q̈, λ and memory at each of 401 saved times), and
     with `outputs="motion"` (q and q̇ alone). The difference is the saved times' acceleration
     solves: a vmapped save loop runs, at every step, as many iterations as the case with the
-    most saved times in that step, each an acceleration solve for every case."""
+    most saved times in that step, each an acceleration solve for every case.
+
+    Then `shared_steps` at `shared_cases` cases of the same spread."""
     import jax
     import jax.numpy as jnp
 
@@ -77,10 +79,43 @@ def batch(cases: int = 256, singles: int = 8, t_end: float = 4e-3) -> dict:
         "singles_timed": singles,
         **default,
         "motion": motion,
+        "shared_steps": shared_steps(scene, shared, restitution, ts, t_end, shared_cases),
         "steps_min_max": [int(steps.min()), int(steps.max())],
         "steps_mean": float(steps.mean()),
         "vmap_solver": vmapped_control(scene.default_control).solver_name(),
         "one_at_a_time_solver": scene.default_control.solver_name(),
+    }
+
+
+def shared_steps(scene, shared, restitution, ts, t_end, cases: int) -> dict:
+    """The batch with every case on one shared step sequence (`benchmarks.shared_steps`)
+    against the plain vmap, both over `cases` cases spread as `restitution` is, warm, per
+    simulation; with the accepted and rejected steps each runs (the plain vmap's per case)."""
+    import jax.numpy as jnp
+
+    from jaxdeploy.batch import batch_function
+
+    from .shared_steps import shared_steps_function
+
+    values = jnp.asarray(restitution[np.linspace(0, len(restitution) - 1, cases).astype(int)])
+    together = shared_steps_function(scene, shared, "restitution", t_end, ts)
+    compile_shared, _ = _timed(together, values)
+    warm_shared, (_, accepted, rejected) = _timed(together, values)
+    plain = batch_function(scene, ("restitution",), shared, t_end, ts)
+    compile_plain, _ = _timed(plain, (values,))
+    warm_plain, trajectory = _timed(plain, (values,))
+    each = np.asarray(trajectory.stats["num_accepted_steps"])
+    return {
+        "cases": cases,
+        "shared_per_simulation_s": warm_shared / cases,
+        "shared_compile_s": compile_shared - warm_shared,
+        "shared_accepted_steps": int(np.asarray(accepted)[0]),
+        "shared_rejected_steps": int(np.asarray(rejected)[0]),
+        "vmap_per_simulation_s": warm_plain / cases,
+        "vmap_compile_s": compile_plain - warm_plain,
+        "vmap_accepted_steps_min_max": [int(each.min()), int(each.max())],
+        "vmap_accepted_steps_mean": float(each.mean()),
+        "ratio": (warm_shared / cases) / (warm_plain / cases),
     }
 
 

@@ -558,3 +558,39 @@ def test_sweep_rows_render_both_device_counts():
     section = "\n".join(page.whole_process_section(w))
     assert "| 2 (default) | second | 20.0 | 21.0 | 7.0 |" in section
     assert "| 1 (one device) | first | 50.0 | 51.0 | 15.0 |" in section
+
+
+def test_shared_steps_give_every_case_the_same_steps_and_a_run_within_tolerance():
+    """`benchmarks.shared_steps`: the cases of the vmap take one step sequence (the same
+    accepted and rejected counts, at least each case's own), and each case's run agrees with
+    its own adaptive run to the tolerance's order (both are adaptive runs of the same model,
+    on other steps)."""
+    import jax.numpy as jnp
+
+    from benchmarks.shared_steps import shared_steps_function
+    from jaxdeploy.batch import batch_function
+    from jaxdeploy.scenes import SliderCrank
+
+    scene = SliderCrank()
+    shared = dict(scene.resolve_params())
+    shared.pop("restitution")
+    values = jnp.asarray([0.8, 0.9, 0.99])
+    ts = jnp.linspace(0.0, 2e-3, 21)
+    q, accepted, rejected = shared_steps_function(scene, shared, "restitution", 2e-3, ts)(values)
+    own = batch_function(scene, ("restitution",), shared, 2e-3, ts)((values,))
+    accepted, rejected = np.asarray(accepted), np.asarray(rejected)
+    assert np.all(accepted == accepted[0]) and np.all(rejected == rejected[0])
+    assert accepted[0] >= int(np.max(np.asarray(own.stats["num_accepted_steps"])))
+    slider = 3 * scene.build(scene.resolve_params()).body_index("slider")  # its x
+    gap = np.max(np.abs(np.asarray(q)[:, :, slider] - np.asarray(own.q)[:, :, slider]))
+    assert 0 < gap < 1e-4, gap
+
+
+def test_shared_steps_sentence_renders_from_its_numbers():
+    b = {"shared_steps": {"cases": 64, "shared_accepted_steps": 5000, "shared_rejected_steps":
+         2000, "vmap_accepted_steps_min_max": [268, 380], "vmap_accepted_steps_mean": 331.0,
+         "shared_per_simulation_s": 0.2, "vmap_per_simulation_s": 0.02, "ratio": 10.0,
+         "shared_compile_s": 9.0, "vmap_compile_s": 8.0}}  # fmt: skip
+    text = page._batch_bounds(b)
+    assert "5000 accepted and 2000 rejected steps against 268–380" in text
+    assert "10.0× the plain vmap's cost" in text
