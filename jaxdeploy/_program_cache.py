@@ -104,12 +104,19 @@ def when_traced(callback):
     compile and run it: from then on the thread mostly waits on XLA, which does not hold
     Python's GIL, so a caller may start tracing something else in another thread. Not called
     when no call goes through the store (off, or uncacheable); None: nothing."""
-    previous = getattr(_hook, "callback", None)
-    _hook.callback = callback
+    with _thread_setting("callback", callback):
+        yield
+
+
+@contextmanager
+def _thread_setting(name: str, value):
+    """`_hook.<name>` = `value` in this thread within the block, as it was after it."""
+    previous = getattr(_hook, name, None)
+    setattr(_hook, name, value)
     try:
         yield
     finally:
-        _hook.callback = previous
+        setattr(_hook, name, previous)
 
 
 def _traced() -> None:
@@ -256,12 +263,8 @@ def ahead_of_time():
 
     For a command that knows its run's shapes before its initial state exists: the run's
     compile then overlaps the assembly's (`jaxdeploy simulate`, `commands/simulate.py`)."""
-    previous = getattr(_hook, "ahead", False)
-    _hook.ahead = True
-    try:
+    with _thread_setting("ahead", True):
         yield
-    finally:
-        _hook.ahead = previous
 
 
 _key_locks: dict[str, threading.Lock] = {}
@@ -294,7 +297,7 @@ def _aval(x):
 def _call(fn, *args):
     import jax
 
-    ahead = getattr(_hook, "ahead", False)
+    ahead = bool(getattr(_hook, "ahead", False))
     where = _folder
     cache_key = None if where is None else key(fn, args)
     if cache_key is None or not folder_is_private(where, "program cache"):
