@@ -154,7 +154,9 @@ def test_a_second_command_reads_the_scene_traces_no_program_and_gives_identical_
         runs.append((done.stderr, json.loads(done.stderr.strip().splitlines()[-1]), out))
     (first_err, first, first_out), (second_err, second, second_out) = runs
     assert "from the scene cache" not in first_err and "from the scene cache" in second_err
-    programs = {"_consistent_core", "_solve", "residuals", "_metered_energy_balance", "_largest_residual"}
+    programs = {
+        "_consistent_core", "_solve", "residuals", "_metered_energy_balance", "_largest_residual"
+    }  # fmt: skip
     assert {f"exported_{name}" for name in programs} <= set(first), first
     assert not [n for n in second if n.startswith(("exported_", "kept_")) or n in programs], second
     assert "init_memory" not in second  # the memory estimate is kept with the scene
