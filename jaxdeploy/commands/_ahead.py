@@ -45,15 +45,12 @@ class CompileAhead:
     """`start(mechanism)` begins compiling the program `simulate(mechanism, initial, t_end,
     n_save=n_save, control=control)` will run, in a daemon thread; `wait()` joins it and
     returns how long the caller waited [s]. Errors stay in the thread: the run's own call
-    raises them again where they belong. `seconds`: the thread's wall time; `ready`: whether
-    it left the program compiled."""
+    raises them again where they belong. `seconds`: the thread's wall time."""
 
     def __init__(self, t_end: float, n_save: int, control):
         self.t_end, self.n_save, self.control = t_end, n_save, control
         self._thread: threading.Thread | None = None
         self.seconds = 0.0
-        self.ready = False
-        self.error: BaseException | None = None
 
     def start(self, mechanism) -> None:
         from .. import _program_cache
@@ -77,10 +74,10 @@ class CompileAhead:
             initial = abstract_state(mechanism)
             with _program_cache.ahead_of_time():
                 simulate(mechanism, initial, self.t_end, n_save=self.n_save, control=self.control)
-        except _program_cache.ProgramReady as made:
-            self.ready = made.ready
-        except BaseException as err:  # noqa: BLE001 - the run's own call raises it again
-            self.error = err
+        except _program_cache.ProgramReady:
+            pass  # made, or not cacheable: the run's call finds out
+        except Exception:  # noqa: BLE001 - the run's own call raises it again, in its thread
+            pass
         finally:
             self.seconds = time.time() - began
 
