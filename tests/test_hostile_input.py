@@ -250,9 +250,17 @@ def test_a_sweep_of_hours_needs_long_run(tmp_path, capsys):
 # --- a result folder belongs to one run ---------------------------------------------------
 
 
-def test_a_second_run_into_a_held_folder_is_refused_naming_the_holder(tmp_path, capsys):
+def test_a_second_run_into_a_held_folder_is_refused_naming_the_holder(
+    tmp_path, capsys, monkeypatch
+):
     from jaxdeploy._output_folder import OutputFolder
+    from jaxdeploy.scenes.pendulum import Pendulum
 
+    def build(self, params):
+        raise AssertionError("built a mechanism for a run whose folder is held")
+
+    # Refused before any work: the build (and the compile of the run beside it) never starts.
+    monkeypatch.setattr(Pendulum, "build", build)
     out = tmp_path / "held"
     with OutputFolder(str(out)).claim():
         code, err = _run(capsys, "simulate", "pendulum", "--out", out, "--overwrite")

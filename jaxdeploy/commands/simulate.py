@@ -140,19 +140,29 @@ def _duration(seconds: float) -> str:
 
 
 def run(args) -> int:
-    """validate → build → plan → run and write; every refusal (exit 2) comes before the
-    output folder is taken and before the run is compiled: a bad run leaves nothing behind."""
+    """validate → take the output folder → build → plan → run and write. Every refusal
+    (exit 2) comes before the run is compiled, and those of the command line and of a folder
+    held by another run before any work; a refusal releases the folder as it was: a bad run
+    leaves nothing behind."""
+    from . import _plan
+
     _read_ahead(args)
     try:
         scene, params, control, t_end = _validate(args)
     except ValueError as err:
         return refuse(str(err))
-    out = args.out or _default_out(args)
-    drawing = _start_figures(scene)
     try:
-        return _build_and_run(args, scene, params, control, t_end, out, drawing)
-    finally:
-        drawing.close()
+        # Taken before the build, as every command takes it: a second run into a held folder
+        # is refused at once, not after its build and its program's compile.
+        folder = _plan.claim_output(args.out or _default_out(args), args.overwrite)
+    except FileExistsError as err:
+        return refuse(str(err))
+    with folder:
+        drawing = _start_figures(scene)
+        try:
+            return _build_and_run(args, scene, params, control, t_end, folder, drawing)
+        finally:
+            drawing.close()
 
 
 def _read_ahead(args) -> None:
@@ -179,7 +189,7 @@ def _start_figures(scene):
     return drawing
 
 
-def _build_and_run(args, scene, params, control, t_end, out, drawing) -> int:
+def _build_and_run(args, scene, params, control, t_end, folder, drawing) -> int:
     """build (the run's program compiled beside it: `_ahead`) → plan → probe → run and
     write, the figures drawn by `drawing`."""
     from ._ahead import CompileAhead
@@ -190,14 +200,13 @@ def _build_and_run(args, scene, params, control, t_end, out, drawing) -> int:
     # every way out (a process that ends while XLA compiles in a thread aborts).
     ahead = CompileAhead(t_end, args.n_save, control)
     try:
-        return _build_then_run(args, scene, params, control, t_end, out, drawing, phases, ahead)
+        return _build_then_run(args, scene, params, control, t_end, folder, drawing, phases, ahead)
     finally:
         ahead.wait()
 
 
-def _build_then_run(args, scene, params, control, t_end, out, drawing, phases, ahead) -> int:
+def _build_then_run(args, scene, params, control, t_end, folder, drawing, phases, ahead) -> int:
     from ..mechanism import AssemblyError
-    from . import _plan
 
     try:
         with phases.phase(
@@ -205,32 +214,27 @@ def _build_then_run(args, scene, params, control, t_end, out, drawing, phases, a
         ):
             mechanism, initial = _build(args, scene, params, control, phases, ahead)
     except _Refused as refused:
-        return refuse(str(refused))
+        return refuse(str(refused))  # the folder is released as it was
     except (ValueError, AssemblyError) as err:
         return refuse(f"scene {scene.name!r} with these parameters: {err}")
+    beside = _reference_beside(args, scene, params, t_end, phases)
+    run = _metered(mechanism, initial)
+    if beside is not None and ahead.started:
+        # The run's program is traced or being compiled beside: the reference's trace
+        # can take its turn now, while XLA compiles (as it does after the run's trace).
+        beside.start()
+    # What the run still waits for of its program compiled ahead is its compile.
+    phases.add("compile_s", ahead.wait())
+    if ahead.seconds:
+        phases.add("compile_ahead_s", ahead.seconds)
     try:
-        folder = _plan.claim_output(out, args.overwrite)
-    except FileExistsError as err:
-        return refuse(str(err))
-    with folder:
-        beside = _reference_beside(args, scene, params, t_end, phases)
-        run = _metered(mechanism, initial)
-        if beside is not None and ahead.started:
-            # The run's program is traced or being compiled beside: the reference's trace
-            # can take its turn now, while XLA compiles (as it does after the run's trace).
-            beside.start()
-        # What the run still waits for of its program compiled ahead is its compile.
-        phases.add("compile_s", ahead.wait())
-        if ahead.seconds:
-            phases.add("compile_ahead_s", ahead.seconds)
-        try:
-            length = _probe(args, scene, params, control, t_end, run, phases, beside)
-        except _Refused as refused:
-            return refuse(str(refused))  # the folder is released as it was
-        return _simulate(
-            args, scene, params, control, t_end, mechanism, run, folder, phases, drawing,
-            beside, length,
-        )  # fmt: skip
+        length = _probe(args, scene, params, control, t_end, run, phases, beside)
+    except _Refused as refused:
+        return refuse(str(refused))
+    return _simulate(
+        args, scene, params, control, t_end, mechanism, run, folder, phases, drawing,
+        beside, length,
+    )  # fmt: skip
 
 
 class _Metered(NamedTuple):

@@ -197,7 +197,7 @@ def _distributed_from_environment() -> dict:
 
 
 def run(args) -> int:
-    """validate → plan (estimates, the folder's lock) → run → write; every refusal (exit 2)
+    """validate → plan (the folder's lock, estimates) → run → write; every refusal (exit 2)
     comes before anything is written, and before anything is compiled but the one that needs
     the compiled sweep: its run length, probed by the sweep's own program before the first
     chunk (`_length_probe`). The ideal reference of an --objective is a simulation: it comes
@@ -215,8 +215,9 @@ def run(args) -> int:
     lock, refusal = None, None
     try:
         plan = _validate(args)
-        _plan_resources(args, plan)
+        # Before the mechanism is built for the estimates: a held folder is refused at once.
         lock = _claim(plan.out)
+        _plan_resources(args, plan)
     except (ValueError, FileExistsError) as err:
         refusal = str(err)
     refusal = _agree(refusal)
