@@ -75,3 +75,62 @@ def test_without_a_process_the_figures_are_drawn_here(tmp_path):
     drawing = FigureProcess()  # never started
     drawing.send("slider_crank", _slider_crank_data(), str(tmp_path))
     assert len(drawing.files()) == 2 and len(list(tmp_path.glob("*.png"))) == 2
+
+
+_SIDE_BY_SIDE = """
+import importlib.util, json, os, pickle, sys
+spec = importlib.util.spec_from_file_location("figures", sys.argv[1])
+figures = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(figures)
+figures._usable_cores = lambda: 2  # fork even on a one-core machine
+forks, fork = [], os.fork
+def counted():
+    forks.append(1)
+    return fork()
+os.fork = counted
+with open(sys.argv[2], "rb") as f:
+    kind, data, out_dir = pickle.load(f)
+try:
+    paths = figures.draw_side_by_side(kind, data, out_dir)
+except RuntimeError as err:
+    print(json.dumps({"error": str(err), "forks": len(forks)}))
+else:
+    print(json.dumps({"paths": paths, "forks": len(forks)}))
+"""
+
+
+def _side_by_side(tmp_path, data, out_dir):
+    import pickle
+
+    request = tmp_path / "request.pkl"
+    request.write_bytes(pickle.dumps(("slider_crank", data, str(out_dir))))
+    done = subprocess.run(
+        [sys.executable, "-P", "-c", _SIDE_BY_SIDE, FIGURES_PY, str(request)],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    return json.loads(done.stdout)
+
+
+def test_figures_drawn_side_by_side_are_those_drawn_in_turn(tmp_path):
+    from jaxdeploy.analysis.figures import draw
+
+    data = _slider_crank_data()
+    (tmp_path / "turn").mkdir()
+    (tmp_path / "side").mkdir()
+    in_turn = draw("slider_crank", data, str(tmp_path / "turn"))
+    side = _side_by_side(tmp_path, data, tmp_path / "side")
+    assert side["forks"] == 1  # the second figure was drawn in the forked copy
+    names = [p.rsplit("/", 1)[-1] for p in side["paths"]]
+    assert names == [p.rsplit("/", 1)[-1] for p in in_turn]  # the same files, in order
+    for name in names:
+        assert (tmp_path / "side" / name).read_bytes() == (tmp_path / "turn" / name).read_bytes()
+
+
+def test_a_figure_that_fails_in_the_forked_copy_is_raised(tmp_path):
+    broken = {**_slider_crank_data(), "joints": [{"eccentricity": np.zeros(3),
+                                                  "normal_force": np.zeros(3)}]}  # fmt: skip
+    (tmp_path / "side").mkdir()
+    side = _side_by_side(tmp_path, broken, tmp_path / "side")
+    assert side["forks"] == 1 and "IndexError" in side["error"], side
+    # The figure drawn here is written; the failed one left nothing behind.
+    assert sorted(p.name for p in (tmp_path / "side").iterdir()) == ["slider_acceleration.png"]

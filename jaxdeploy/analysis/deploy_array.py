@@ -177,10 +177,10 @@ def deploy_array_summary(outputs, mechanism, trajectory) -> dict:
 
 
 def deploy_array_plot_data(outputs) -> dict:
-    """What `figures.deploy_array` draws, from a run's `deploy_array_outputs`: those, the
-    lock time to mark (the run's end when it did not lock), the panels, and each panel's
-    Welch spectrum of its interval-mean Y acceleration before and after the lock (where
-    there are more than 8 intervals), with the spectra's upper frequency [Hz]."""
+    """What `figures.DRAWINGS["deploy_array"]` draws, from a run's `deploy_array_outputs`:
+    those, the lock time to mark (the run's end when it did not lock), the panels, and each
+    panel's Welch spectrum of its interval-mean Y acceleration before and after the lock
+    (where there are more than 8 intervals), with the spectra's upper frequency [Hz]."""
     o = outputs
     ts = o["t"]
     t_lock = o["lock_time"] if np.isfinite(o["lock_time"]) else ts[-1]

@@ -10,6 +10,7 @@ following it. In a program, `Analysis.plot(out_dir)` calls `draw` directly.
 
 from __future__ import annotations
 
+import ast
 import io
 import os
 import tempfile
@@ -55,12 +56,21 @@ def save(fig, path: str, **kwargs) -> None:
         raise
 
 
-def slider_crank(data: dict, out_dir: str) -> list[str]:
-    """Slider acceleration against the closed-form ideal one, and per clearance joint the
-    journal orbit and contact force (`SliderCrankAnalysis.plot_data`)."""
+def _saved(fig, out_dir: str, name: str) -> list[str]:
+    """`fig` laid out and written as `out_dir/name` (130 dpi); the list of that one file."""
+    fig.tight_layout()
+    path = os.path.join(out_dir, name)
+    save(fig, path, dpi=130)
+    return [path]
+
+
+# --- slider_crank (`SliderCrankAnalysis.plot_data`) ---------------------------------------
+
+
+def _slider_acceleration(data: dict, out_dir: str) -> list[str]:
+    """Slider acceleration against the closed-form ideal one, over the crank angle."""
     plt = _pyplot()
     crank_angle = data["crank_angle"]
-    files = []
     fig, ax = plt.subplots(figsize=(7, 4))
     ax.plot(crank_angle, data["slider_acceleration"], lw=0.8, label="clearance joint")
     ax.plot(crank_angle, data["slider_acceleration_ideal"], "k--", lw=1.0,
@@ -69,11 +79,15 @@ def slider_crank(data: dict, out_dir: str) -> list[str]:
     ax.set_ylabel("slider acceleration [m/s²]")
     ax.legend()
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    files.append(os.path.join(out_dir, "slider_acceleration.png"))
-    save(fig, files[-1], dpi=130)
+    return _saved(fig, out_dir, "slider_acceleration.png")
 
-    c = data["clearance"]
+
+def _journal_orbits(data: dict, out_dir: str) -> list[str]:
+    """Per clearance joint, the journal's orbit in its clearance circle and the normal contact
+    force over the crank angle."""
+    plt = _pyplot()
+    crank_angle, c = data["crank_angle"], data["clearance"]
+    files = []
     for history in data["joints"]:
         ecc = history["eccentricity"]
         fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4.2))
@@ -88,29 +102,19 @@ def slider_crank(data: dict, out_dir: str) -> list[str]:
         ax2.set_xlabel("crank angle [deg]")
         ax2.set_ylabel("normal contact force [N]")
         ax2.grid(alpha=0.3)
-        fig.tight_layout()
-        files.append(os.path.join(out_dir, "journal_orbit_contact_force.png"))
-        save(fig, files[-1], dpi=130)
+        files += _saved(fig, out_dir, "journal_orbit_contact_force.png")
     return files
 
 
-def deploy_array(data: dict, out_dir: str) -> list[str]:
-    """Deployment angle, deviations from the ideal mechanism (when the data has the
-    reference), panel accelerations with their Welch spectra, contact forces
-    (`DeployArrayAnalysis.plot_data`)."""
+# --- deploy_array (`DeployArrayAnalysis.plot_data`) ---------------------------------------
+
+
+def _deployment_angle(data: dict, out_dir: str) -> list[str]:
+    """Deployment angle, with the ideal mechanism's and the deviation from it below when there
+    is a reference; the lock marked on the lower axes."""
     plt = _pyplot()
-    o = data
+    o, ts = data, data["t"]
     with_reference = "alpha_ideal" in o
-    ts, t_lock, panels = o["t"], o["t_lock"], o["panels"]
-    files = []
-
-    def save_as(fig, name):
-        fig.tight_layout()
-        files.append(os.path.join(out_dir, name))
-        save(fig, files[-1], dpi=130)
-
-    # The angle, with the ideal mechanism's and the deviation from it below when there is
-    # a reference; the lock marked on the lower axes.
     rows = 2 if with_reference else 1
     fig, axes = plt.subplots(rows, 1, figsize=(7, 3 * rows), sharex=True, squeeze=False)
     ax1 = axes[0, 0]
@@ -121,30 +125,42 @@ def deploy_array(data: dict, out_dir: str) -> list[str]:
         axes[1, 0].set_ylabel("α − α_ideal [deg]")
     ax1.set_ylabel("deployment angle α [deg]")
     ax1.legend()
-    axes[-1, 0].axvline(t_lock, color="grey", ls=":", label="lock")
+    axes[-1, 0].axvline(o["t_lock"], color="grey", ls=":", label="lock")
     axes[-1, 0].set_xlabel("time [s]")
     for ax in axes[:, 0]:
         ax.grid(alpha=0.3)
-    save_as(fig, "deployment_angle.png")
+    return _saved(fig, out_dir, "deployment_angle.png")
 
-    if with_reference:
-        fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
-        for row, panel in enumerate(panels):
-            for col, axis_name in enumerate("XY"):
-                ax = axes[row, col]
-                for where, style in (("centre", "-"), ("tip", "--")):
-                    d = o[f"{panel}_{where}_deviation"][:, col] * 1e6
-                    ax.plot(ts, d, style, lw=0.7, label=where)
-                ax.set_title(f"{panel}: {axis_name} displacement deviation")
-                ax.set_ylabel("deviation [µm]")
-                ax.grid(alpha=0.3)
-                ax.legend(fontsize=8)
-        for ax in axes[-1]:
-            ax.set_xlabel("time [s]")
-        save_as(fig, "panel_displacement_deviation.png")
 
+def _displacement_deviation(data: dict, out_dir: str) -> list[str]:
+    """Each panel's centre and tip displacement from the ideal mechanism's (with a reference
+    only)."""
+    if "alpha_ideal" not in data:
+        return []
+    plt = _pyplot()
+    o, ts = data, data["t"]
+    fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
+    for row, panel in enumerate(o["panels"]):
+        for col, axis_name in enumerate("XY"):
+            ax = axes[row, col]
+            for where, style in (("centre", "-"), ("tip", "--")):
+                d = o[f"{panel}_{where}_deviation"][:, col] * 1e6
+                ax.plot(ts, d, style, lw=0.7, label=where)
+            ax.set_title(f"{panel}: {axis_name} displacement deviation")
+            ax.set_ylabel("deviation [µm]")
+            ax.grid(alpha=0.3)
+            ax.legend(fontsize=8)
+    for ax in axes[-1]:
+        ax.set_xlabel("time [s]")
+    return _saved(fig, out_dir, "panel_displacement_deviation.png")
+
+
+def _acceleration_spectra(data: dict, out_dir: str) -> list[str]:
+    """Each panel's Y acceleration and its Welch spectra, phase by phase."""
+    plt = _pyplot()
+    o, ts = data, data["t"]
     fig, axes = plt.subplots(2, 2, figsize=(10, 6))
-    for row, panel in enumerate(panels):
+    for row, panel in enumerate(o["panels"]):
         axes[row, 0].plot(ts, o[f"{panel}_acceleration"][:, 1], lw=0.5)
         axes[row, 0].set_title(f"{panel}: Y acceleration of the centre")
         axes[row, 0].set_ylabel("a_y [m/s²]")
@@ -156,29 +172,85 @@ def deploy_array(data: dict, out_dir: str) -> list[str]:
         axes[row, 1].set_ylabel("PSD of a_y [(m/s²)²/Hz]")
         axes[row, 1].set_xlabel("frequency [Hz]")
         axes[row, 1].legend(fontsize=8)
-    save_as(fig, "panel_acceleration_spectra.png")
-
-    if o["joints"]:
-        fig, axes = plt.subplots(
-            len(o["joints"]), 1, figsize=(7, 2.6 * len(o["joints"])), squeeze=False, sharex=True
-        )
-        for ax, (owner, h) in zip(axes[:, 0], o["joints"].items(), strict=True):
-            ax.plot(ts, h["normal_force"], lw=0.6)
-            ax.set_title(f"{owner} hinge: normal contact force")
-            ax.set_ylabel("normal force [N]")
-            ax.grid(alpha=0.3)
-        axes[-1, 0].set_xlabel("time [s]")
-        save_as(fig, "contact_forces.png")
-    return files
+    return _saved(fig, out_dir, "panel_acceleration_spectra.png")
 
 
-# A scene's figures by the name its analysis gives (`Analysis.figures`).
-DRAWINGS = {"slider_crank": slider_crank, "deploy_array": deploy_array}
+def _contact_forces(data: dict, out_dir: str) -> list[str]:
+    """Each clearance hinge's normal contact force (with clearance joints only)."""
+    joints = data["joints"]
+    if not joints:
+        return []
+    plt = _pyplot()
+    fig, axes = plt.subplots(len(joints), 1, figsize=(7, 2.6 * len(joints)), squeeze=False,
+                             sharex=True)  # fmt: skip
+    for ax, (owner, h) in zip(axes[:, 0], joints.items(), strict=True):
+        ax.plot(data["t"], h["normal_force"], lw=0.6)
+        ax.set_title(f"{owner} hinge: normal contact force")
+        ax.set_ylabel("normal force [N]")
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    return _saved(fig, out_dir, "contact_forces.png")
+
+
+# A scene's figures by the name its analysis gives (`Analysis.figures`): one function per
+# figure file (data, out_dir) -> the files it wrote, so that they can be drawn side by side.
+DRAWINGS = {
+    "slider_crank": (_slider_acceleration, _journal_orbits),
+    "deploy_array": (
+        _deployment_angle,
+        _displacement_deviation,
+        _acceleration_spectra,
+        _contact_forces,
+    ),
+}
 
 
 def draw(kind: str, data: dict, out_dir: str) -> list[str]:
-    """The figures `DRAWINGS[kind]` of `data` written into `out_dir`; the files written."""
-    return DRAWINGS[kind](data, out_dir)
+    """The figures `DRAWINGS[kind]` of `data` written into `out_dir`, one after the other;
+    the files written."""
+    return [path for figure in DRAWINGS[kind] for path in figure(data, out_dir)]
+
+
+def draw_side_by_side(kind: str, data: dict, out_dir: str) -> list[str]:
+    """`draw`, with every second figure drawn in a forked copy of this process on another
+    core: a figure is mostly matplotlib laying out text and rasterising, in Python, one
+    core each (deploy_array's four: 0.95 s one after the other). Drawn in turn where the
+    system cannot fork or this process may use one core only. The files in `draw`'s order."""
+    figures = DRAWINGS[kind]
+    if len(figures) < 2 or not hasattr(os, "fork") or _usable_cores() < 2:
+        return draw(kind, data, out_dir)
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the copy: draw the odd figures, send their files, leave at once
+        os.close(read)
+        code = 0
+        try:
+            paths = [[*figure(data, out_dir)] for figure in figures[1::2]]
+            message = repr(paths).encode()
+        except BaseException as err:  # noqa: BLE001 - reported to the parent, which raises
+            code, message = 1, f"{type(err).__name__}: {err}".encode()
+        with os.fdopen(write, "wb") as pipe:
+            pipe.write(message)
+        os._exit(code)  # no interpreter shutdown in a forked copy: nothing else runs
+    os.close(write)
+    try:
+        mine = [[*figure(data, out_dir)] for figure in figures[0::2]]
+    finally:
+        with os.fdopen(read, "rb") as pipe:
+            message = pipe.read().decode()
+        _, status = os.waitpid(pid, 0)
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise RuntimeError(f"drawing {kind}'s figures beside failed: {message}")
+    theirs = ast.literal_eval(message)
+    ordered = [None] * len(figures)
+    ordered[0::2], ordered[1::2] = mine, theirs
+    return [path for paths in ordered for path in paths]
+
+
+def _usable_cores() -> int:
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def serve() -> int:
@@ -194,7 +266,7 @@ def serve() -> int:
     if not request:
         return 0
     kind, data, out_dir = pickle.loads(request)
-    for path in draw(kind, data, out_dir):
+    for path in draw_side_by_side(kind, data, out_dir):
         print(path, flush=True)
     return 0
 

@@ -37,7 +37,7 @@ def slider_crank_summary(mechanism, trajectory) -> dict:
 
 
 def slider_crank_plot_data(params, mechanism, trajectory) -> dict:
-    """What `figures.slider_crank` draws: the crank angle [deg] at the saved times, the
+    """What `figures.DRAWINGS["slider_crank"]` draws: the crank angle [deg] at the saved times, the
     slider's acceleration [m/s²] and the closed-form ideal one, and per clearance joint its
     eccentricity [m] and normal force [N]; `params` complete (`SliderCrank.complete`)."""
     ts = np.asarray(trajectory.ts)
