@@ -134,3 +134,14 @@ def test_a_figure_that_fails_in_the_forked_copy_is_raised(tmp_path):
     assert side["forks"] == 1 and "IndexError" in side["error"], side
     # The figure drawn here is written; the failed one left nothing behind.
     assert sorted(p.name for p in (tmp_path / "side").iterdir()) == ["slider_acceleration.png"]
+
+
+def test_the_figure_process_is_started_by_the_scene_name_its_analysis_uses():
+    # `simulate` starts the figure process before it imports the scenes, by the scene's name:
+    # every analysis that draws names its figures after its scene, and figures.py has them.
+    from jaxdeploy.analysis import ANALYSES
+    from jaxdeploy.commands._figures import drawing_names
+
+    drawn = {scene: cls.figures for scene, cls in ANALYSES.items() if cls.figures is not None}
+    assert drawn and all(figures == scene for scene, figures in drawn.items())
+    assert drawing_names() == frozenset(drawn)

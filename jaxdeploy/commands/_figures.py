@@ -3,8 +3,10 @@
 matplotlib's import takes about a second and drawing a scene's figures about half of one, all
 of it Python holding the GIL: in the command's own process they followed the run. The figure
 process (`jaxdeploy/analysis/figures.py`, which imports numpy and matplotlib alone, not JAX) is
-started once the command knows its scene draws figures; it imports matplotlib on the
-machine's other core while the command builds, loads and runs its programs, then draws from
+started as the command starts when figures.py draws figures named after its scene
+(`named_drawing`, checked against the scene's analysis once the scene is imported); it
+imports matplotlib on the machine's other core while the command imports the scenes, builds,
+loads and runs its programs, then draws from
 the numbers the analysis computed (`Analysis.plot_data`, sent pickled on its standard input)
 while the command writes its other files. Where no second process can be started, the
 figures are drawn in this one, as before.
@@ -12,8 +14,10 @@ figures are drawn in this one, as before.
 
 from __future__ import annotations
 
+import functools
 import os
 import pickle
+import runpy
 import subprocess
 import sys
 import threading
@@ -25,6 +29,13 @@ FIGURES_PY = os.path.join(os.path.dirname(os.path.dirname(__file__)), "analysis"
 # Runs figures.py as __main__ without putting its folder on sys.path (`-P`; runpy does not
 # add a file's folder either): the package's modules must not shadow the libraries' names.
 _BOOT = "import runpy, sys; runpy.run_path(sys.argv[1], run_name='__main__')"
+
+
+@functools.cache
+def drawing_names() -> frozenset[str]:
+    """The names of figures.py's drawings (`DRAWINGS`), read from the file itself: importing
+    it through the package would import JAX and the scenes first."""
+    return frozenset(runpy.run_path(FIGURES_PY)["DRAWINGS"])
 
 
 def _plain(value):
@@ -50,7 +61,13 @@ class FigureProcess:
         self._thread: threading.Thread | None = None
         self._outcome: tuple | None = None
 
+    @property
+    def started(self) -> bool:
+        return self._process is not None
+
     def start(self) -> None:
+        if self._process is not None:
+            return
         try:
             self._process = subprocess.Popen(
                 [sys.executable, "-P", "-c", _BOOT, FIGURES_PY],

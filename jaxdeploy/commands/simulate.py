@@ -144,9 +144,19 @@ def run(args) -> int:
     (exit 2) comes before the run is compiled, and those of the command line and of a folder
     held by another run before any work; a refusal releases the folder as it was: a bad run
     leaves nothing behind."""
+    _read_ahead(args)
+    # Started first, by the scene's name (`_figures`): matplotlib's import in the figure
+    # process then overlaps the imports of the scenes here, not only the build and the run.
+    drawing = _figures_ahead(args.scene or DEFAULT_SCENE)
+    try:
+        return _validate_and_run(args, drawing)
+    finally:
+        drawing.close()  # a refused run's process ends without drawing
+
+
+def _validate_and_run(args, drawing) -> int:
     from . import _plan
 
-    _read_ahead(args)
     try:
         scene, params, control, t_end = _validate(args)
     except ValueError as err:
@@ -158,11 +168,8 @@ def run(args) -> int:
     except FileExistsError as err:
         return refuse(str(err))
     with folder:
-        drawing = _start_figures(scene)
-        try:
-            return _build_and_run(args, scene, params, control, t_end, folder, drawing)
-        finally:
-            drawing.close()
+        _figures_of(scene, drawing)
+        return _build_and_run(args, scene, params, control, t_end, folder, drawing)
 
 
 def _read_ahead(args) -> None:
@@ -177,16 +184,27 @@ def _read_ahead(args) -> None:
     _read_ahead.start("jaxdeploy simulate " + repr(chosen))
 
 
-def _start_figures(scene):
-    """The figure process of the run (`_figures`), started now when the scene's analysis
-    draws figures, so that its matplotlib import overlaps the build and the run."""
-    from ..analysis import analysis_class
-    from ._figures import FigureProcess
+def _figures_ahead(scene_name: str):
+    """The run's figure process (`_figures.FigureProcess`), started now when figures.py has a
+    drawing of that name: a scene's analysis names its figures after the scene
+    (`_figures_of` checks it once the scene is known)."""
+    from ._figures import FigureProcess, drawing_names
 
     drawing = FigureProcess()
-    if analysis_class(scene).figures is not None:
+    if scene_name in drawing_names():
         drawing.start()
     return drawing
+
+
+def _figures_of(scene, drawing) -> None:
+    """The figure process as `scene`'s analysis needs it: started when it draws figures (if
+    `_figures_ahead` did not), ended when it draws none."""
+    from ..analysis import analysis_class
+
+    if analysis_class(scene).figures is not None:
+        drawing.start()
+    else:
+        drawing.close()
 
 
 def _build_and_run(args, scene, params, control, t_end, folder, drawing) -> int:
