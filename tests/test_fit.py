@@ -431,3 +431,51 @@ def test_cli_fit_recovers_deploy_array_contact_parameters(tmp_path):
             assert abs(est - wrong) > 3 * se, (name, wrong, est, se)
     assert 0.8 < report["reduced_chi2"] < 1.2
     assert report["not_identified"] == [] and report["adequate"]
+
+
+def test_the_tighter_tolerance_program_compiled_ahead_is_the_one_the_check_calls():
+    """`Model.compile_ahead`: the program of rtol/10 (another method: "auto" takes Dopri8
+    below rtol 1e-8, Tsit5 at it) is traced and compiled in a second thread; the check's
+    call waits for it, traces nothing itself and gives what a model without the thread
+    gives. A control that shares the model's program starts no thread."""
+    import threading
+
+    import jax
+
+    from jaxdeploy.fit._fit import Model
+    from jaxdeploy.fit._schedule import _scaled
+
+    scene = Impact(damping="lankarani_nikravesh")
+    base = scene.resolve_params({})
+    params = make_parameters(scene, ["restitution=0.6:0.05:0.99"], scene.resolve_params({}))
+    ts = np.linspace(0.0, 6e-4, 31)
+
+    def model():
+        return Model(scene, params, base, ["journal_x"], ts, {"solver": "auto"}, {})
+
+    ahead, plain = model(), model()
+    tight = _scaled(ahead.control, 0.1)
+    assert tight.resolved_solver() != ahead.control.resolved_solver()
+    ahead.compile_ahead(_scaled(ahead.control, 2.0), np.zeros(1))  # the same program
+    assert ahead._ahead is None
+    ahead.compile_ahead(tight, np.zeros(1))
+    assert ahead._ahead is not None
+    z = np.array([0.3])
+    here, traces = threading.current_thread(), []
+    jax.monitoring.register_event_duration_secs_listener(
+        lambda event, _s, **kw: (
+            traces.append(event)
+            if event == "/jax/core/compile/jaxpr_trace_duration"
+            and threading.current_thread() is here
+            else None
+        )
+    )
+    try:  # at once, while the thread traces or compiles the program: this call waits for it
+        channels, jac, ok = ahead(z, control=tight)
+    finally:
+        jax.monitoring.clear_event_listeners()
+    assert traces == []
+    expected = plain(z, control=tight)
+    assert ok and expected[2]
+    np.testing.assert_array_equal(channels["journal_x"], expected[0]["journal_x"])
+    np.testing.assert_array_equal(jac["journal_x"], expected[1]["journal_x"])

@@ -43,7 +43,7 @@ from ._adequacy import assess
 from ._data import Measurements
 from ._parameters import FitParameter, internal_vector, make_parameters
 from ._residuals import Comparison, ResidualSpec
-from ._schedule import tighten
+from ._schedule import _scaled, tighten
 
 # A parameter whose standard error exceeds this fraction of its value is reported as not
 # identified; a pair with |correlation| above CORRELATED as confounded.
@@ -299,6 +299,7 @@ class Model:
             simulate_options = {"replay_steps": True, **simulate_options}
 
         self.ts = ts
+        self._ahead = None  # the thread of `compile_ahead`
 
         def evaluate(z, ts_run, control):
             params = dict(fixed)
@@ -325,6 +326,35 @@ class Model:
         self._batch = tolerances_as_data(
             lambda c, zs, t: jax.vmap(lambda z: evaluate(z, t, c)[1])(zs)
         )
+
+    def compile_ahead(self, control, z) -> None:
+        """Compile the Jacobian program of `control` (a `StepControl` differing from the
+        model's in its tolerances) in a second thread, by one evaluation at the internal point
+        `z` whose result is dropped; a call of that program meanwhile waits for it (`jax.jit`
+        traces and compiles a function once for concurrent callers: measured, jax 0.10.2).
+        Nothing is started when `control` shares the model's program: the
+        tolerances are data (`tolerances_as_data`), and only an automatic solver choice
+        that resolves to another method at `control`'s rtol makes a second program.
+
+        Why: a fit that checks its tolerance between stages (`fit`'s `model_error`) needs the
+        program of the 10x tighter tolerance after its first stage. slider_crank's fit at rtol
+        1e-8 (Tsit5) checks at 1e-9 (Dopri8): two programs of ~9.5 s of tracing and XLA
+        compiling each, one after the other on one core while the other was idle."""
+        import threading
+
+        if self._ahead is not None or control.resolved_solver() == self.control.resolved_solver():
+            return
+        z, ts = np.asarray(z, dtype=float), self.save_times()
+
+        def compile_program():
+            try:
+                self._jac(control, z, ts)
+            except Exception:  # noqa: BLE001 - the run's own call of the program raises it
+                pass
+
+        # Not a daemon: a process that ends while XLA compiles in a daemon thread aborts.
+        self._ahead = threading.Thread(target=compile_program, name="fit-compile-ahead")
+        self._ahead.start()
 
     def save_times(self, n: int | None = None) -> np.ndarray:
         """The first `n` save times, padded with the last of them to the compiled length."""
@@ -630,6 +660,10 @@ def fit(
     compiled = Model(scene, params, base, longest.names, longest.ts, control, simulate_options)
     control = compiled.control
     recheck = model_error is not None and control.rtol is not None and longest.noise_known
+    if recheck and len(specs) > 1:
+        # The check before the second stage runs the model at rtol/10 (`tolerance_at_estimate`):
+        # its program is compiled on the other core while the first stage compiles and fits.
+        compiled.compile_ahead(_scaled(control, 0.1), z)
     k = 0
     while k < len(specs):
         tolerance = None
