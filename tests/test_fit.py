@@ -462,18 +462,16 @@ def test_the_tighter_tolerance_program_compiled_ahead_is_the_one_the_check_calls
     assert ahead._ahead is not None
     z = np.array([0.3])
     here, traces = threading.current_thread(), []
-    jax.monitoring.register_event_duration_secs_listener(
-        lambda event, _s, **kw: (
+
+    def listener(event, _seconds, **kwargs):
+        if event == "/jax/core/compile/jaxpr_trace_duration" and threading.current_thread() is here:
             traces.append(event)
-            if event == "/jax/core/compile/jaxpr_trace_duration"
-            and threading.current_thread() is here
-            else None
-        )
-    )
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
     try:  # at once, while the thread traces or compiles the program: this call waits for it
         channels, jac, ok = ahead(z, control=tight)
-    finally:
-        jax.monitoring.clear_event_listeners()
+    finally:  # only this listener: other tests' stay registered
+        jax.monitoring.unregister_event_duration_listener(listener)
     assert traces == []
     expected = plain(z, control=tight)
     assert ok and expected[2]
