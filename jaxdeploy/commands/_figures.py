@@ -4,7 +4,7 @@ matplotlib's import takes about a second and drawing a scene's figures about hal
 of it Python holding the GIL: in the command's own process they followed the run. The figure
 process (`jaxdeploy/analysis/figures.py`, which imports numpy and matplotlib alone, not JAX) is
 started as the command starts when figures.py draws figures named after its scene
-(`named_drawing`, checked against the scene's analysis once the scene is imported); it
+(`drawing_names`, checked against the scene's analysis once the scene is imported); it
 imports matplotlib on the machine's other core while the command imports the scenes, builds,
 loads and runs its programs, then draws from
 the numbers the analysis computed (`Analysis.plot_data`, sent pickled on its standard input)
@@ -60,10 +60,6 @@ class FigureProcess:
         self._request = None
         self._thread: threading.Thread | None = None
         self._outcome: tuple | None = None
-
-    @property
-    def started(self) -> bool:
-        return self._process is not None
 
     def start(self) -> None:
         if self._process is not None:
