@@ -330,8 +330,11 @@ class Model:
     def compile_ahead(self, control, z) -> None:
         """Compile the Jacobian program of `control` (a `StepControl` differing from the
         model's in its tolerances) in a second thread, by one evaluation at the internal point
-        `z` whose result is dropped; a call of that program meanwhile waits for it (`jax.jit`
-        traces and compiles a function once for concurrent callers: measured, jax 0.10.2).
+        `z` whose result is dropped; a call with another control than the model's meanwhile
+        waits for the thread (`__call__`), so that it finds the program compiled. (Two
+        threads that call one `jax.jit` function usually trace and compile it once, but not
+        always: on jax 0.10.2 a test that relied on it failed in two of four runs of the
+        fast suite, with the second thread tracing the program itself.)
         Nothing is started when `control` shares the model's program: the
         tolerances are data (`tolerances_as_data`), and only an automatic solver choice
         that resolves to another method at `control`'s rtol makes a second program.
@@ -376,6 +379,8 @@ class Model:
         `{name: (N, p)}`, of which the first `n` samples are the save times. `control`: a
         `StepControl` differing from the model's in its tolerances (default the model's)."""
         control = self.control if control is None else control
+        if self._ahead is not None and control is not self.control:
+            self._ahead.join()  # `compile_ahead`: the program is being compiled there
         jac, (model, ok) = self._jac(control, np.asarray(z, dtype=float), self.save_times(n))
         model = {n: np.asarray(v) for n, v in model.items()}
         jac = {n: np.asarray(v) for n, v in jac.items()}
