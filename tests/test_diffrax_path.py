@@ -241,3 +241,6 @@ def test_saving_fewer_outputs_leaves_the_kept_ones_bit_identical():
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     with pytest.raises(ValueError, match="outputs = 'no' is invalid"):
         simulate(mech, s0, 2e-4, solver="tsit5", rtol=1e-7, ts=ts, outputs="no")
+    with pytest.raises(ValueError, match="batch_saved_accelerations = 'yes' is invalid"):
+        simulate(mech, s0, 2e-4, solver="tsit5", rtol=1e-7, ts=ts,
+                 batch_saved_accelerations="yes")  # fmt: skip

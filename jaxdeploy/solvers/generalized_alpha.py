@@ -372,6 +372,12 @@ class GeneralizedAlphaInterpolation(dfx.AbstractLocalInterpolation):
         y = self.hermite.evaluate(t)
         return y.q, y.v, y.memory
 
+    def acceleration_inputs(self, t):
+        """`(q, q̇, memory, step_memory)` at `t`: `motion` and the memory `evaluate` solves
+        q̈ and λ with (the step's), for a caller that solves them later."""
+        y = self.hermite.evaluate(t)
+        return y.q, y.v, y.memory, self.memory
+
 
 class GeneralizedAlpha(dfx.AbstractAdaptiveSolver):
     """Index-3 generalized-α (Arnold & Brüls 2007) for a `MechanismTerm`.

@@ -162,6 +162,12 @@ class MechanismInterpolation(dfx.AbstractLocalInterpolation):
         drop it cost a third of the traced program)."""
         return self._motion(t)[:3]
 
+    def acceleration_inputs(self, t):
+        """`(q, q̇, memory, step_memory)` at `t`: `motion` and the memory `evaluate` solves
+        q̈ and λ with (`accelerations_at`: the step's, with the interpolated internal states
+        if any), for a caller that solves them later."""
+        return self._motion(t)
+
     def _motion(self, t):
         """`(q, q̇, memory, step_memory)`: the output state at `t` and the memory its
         accelerations see (the step's, with the interpolated internal states if any)."""

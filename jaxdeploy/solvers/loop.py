@@ -186,6 +186,7 @@ def solve(
     *,
     ts=None,
     fn=None,
+    dense_fn=None,
     save_steps: bool = False,
     kind: str = "checkpointed",
     checkpoints: int | None = None,
@@ -195,10 +196,14 @@ def solve(
     `controller` from a first step `dt0`, at most `max_steps` steps (module docstring).
 
     **Arguments:** `ts`: save times in [t0, t1], non-decreasing; `fn(t, y, args)`: what a
-    saved time keeps (default: the state); `save_steps`: also save the end of every accepted
-    step; `kind`: the while loop (`KINDS`, `kind_for`); `checkpoints`: for `"checkpointed"`,
-    as `RecursiveCheckpointAdjoint(checkpoints=...)`; `progress_meter`: a diffrax progress
-    meter (default none).
+    saved time keeps (default: the state; `args` None); `dense_fn(t, dense)`: the same, from
+    the dense output `dense` of the step the time lies in, for what needs more of the step
+    than its state or less than `dense.evaluate` traces (default `fn(t, dense.evaluate(t),
+    None)`; `fn` still gives the state at t₀ when t₀ = t₁, in the same structure);
+    `save_steps`: also save the end of every accepted step; `kind`: the while loop (`KINDS`,
+    `kind_for`); `checkpoints`: for
+    `"checkpointed"`, as `RecursiveCheckpointAdjoint(checkpoints=...)`; `progress_meter`: a
+    diffrax progress meter (default none).
 
     **Returns:** a `Solution`. Like `diffeqsolve(..., throw=False)`, it never raises on a
     failed run: the failure is its `result`.
@@ -208,6 +213,13 @@ def solve(
     if not (isinstance(max_steps, int) and max_steps > 0):
         raise ValueError(f"max_steps = {max_steps!r} is invalid: it must be an integer > 0")
     fn = _identity if fn is None else fn
+    if dense_fn is None:
+
+        def save(t, dense):
+            return fn(t, dense.evaluate(t), None)
+
+    else:
+        save = dense_fn
     meter = dfx.NoProgressMeter() if progress_meter is None else progress_meter
     t0, t1 = jnp.asarray(t0, dtype=float), jnp.asarray(t1, dtype=float)
     dt0 = jnp.asarray(dt0, dtype=float)
@@ -251,7 +263,7 @@ def solve(
         return (c.tprev < t1) & dfx.is_successful(c.result)
 
     def body(c):
-        return _step(c, term, solver, controller, t0, t1, floor, ts, fn, kind, error_order, meter)
+        return _step(c, term, solver, controller, t0, t1, floor, ts, save, kind, error_order, meter)
 
     def buffers(c):
         # The structure alone (None fields included): equinox replaces the leaves by
@@ -289,7 +301,7 @@ def solve(
     )
 
 
-def _step(c, term, solver, controller, t0, t1, floor, ts, fn, kind, error_order, meter):
+def _step(c, term, solver, controller, t0, t1, floor, ts, save, kind, error_order, meter):
     """One attempted step: the solver's step, the controller's decision, the saves."""
     made_jump = False if c.made_jump is None else c.made_jump
     y, y_error, dense_info, solver_state, solver_result = solver.step(
@@ -319,7 +331,7 @@ def _step(c, term, solver, controller, t0, t1, floor, ts, fn, kind, error_order,
     if ts is not None:
         dense = solver.interpolation_cls(t0=c.tprev, t1=c.tnext, **dense_info)
         save_ts, save_ys, save_index, ts_index = _save_in_step(
-            keep_step, c.tnext, dense, ts, fn, kind, (save_ts, save_ys, save_index, ts_index)
+            keep_step, c.tnext, dense, ts, save, kind, (save_ts, save_ys, save_index, ts_index)
         )
     step_ts = c.step_ts
     if step_ts is not None:
@@ -344,7 +356,7 @@ def _step(c, term, solver, controller, t0, t1, floor, ts, fn, kind, error_order,
     )
 
 
-def _save_in_step(keep_step, tnext, dense, ts, fn, kind, saves):
+def _save_in_step(keep_step, tnext, dense, ts, save, kind, saves):
     """Every save time of a kept step's interval (tₙ, tₙ₊₁] not saved yet, from its dense
     output: a loop over the save times, as diffrax's (one iteration per time saved)."""
     n = ts.shape[0]
@@ -356,7 +368,7 @@ def _save_in_step(keep_step, tnext, dense, ts, fn, kind, saves):
     def body(s):
         save_ts, save_ys, save_index, i = s
         t = ts[i]
-        y = fn(t, dense.evaluate(t), None)
+        y = save(t, dense)
         save_ts = save_ts.at[save_index].set(t)
         # Over y's structure: inside a checkpointed loop each leaf of save_ys is a buffer.
         save_ys = jax.tree.map(lambda yi, ys: ys.at[save_index].set(yi), y, save_ys)
