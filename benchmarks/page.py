@@ -31,9 +31,9 @@ def _batch_bounds(b: dict) -> str:
             f'Saving q and q̇ alone (`outputs="motion"`) takes {_f(share, ".0%")} off the vmap '
             f"({mo['vmap_per_simulation_s']:.3g} s per simulation) and "
             f"{_f(single, '.0%')} "
-            "off one at a time: a vmapped save loop runs, at every step, as many iterations as "
-            "the case with the most saved times in that step, each an acceleration solve for "
-            "every case."
+            "off one at a time: the saved times' q̈ and λ, which the batch solves after its "
+            "loop, vmapped over the saved times (`simulate`'s `batch_saved_accelerations`, "
+            "set by `batch_function`), and a run alone inside its loop."
         )
     sh = b.get("shared_steps")
     if sh:

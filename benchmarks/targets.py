@@ -30,9 +30,9 @@ def batch(cases: int = 256, singles: int = 8, t_end: float = 4e-3, shared_cases:
     0.8–0.99. Run in a process pinned to one core, so both use the same hardware.
 
     Twice: with the default outputs (q, q̇, q̈, λ and memory at each of 401 saved times), and
-    with `outputs="motion"` (q and q̇ alone). The difference is the saved times' acceleration
-    solves: a vmapped save loop runs, at every step, as many iterations as the case with the
-    most saved times in that step, each an acceleration solve for every case.
+    with `outputs="motion"` (q and q̇ alone). The difference is the saved times' q̈ and λ:
+    the batch solves them after its loop, vmapped over the saved times (`batch_function`
+    sets `simulate`'s `batch_saved_accelerations`), a run alone inside its loop.
 
     Then `shared_steps` at `shared_cases` cases of the same spread."""
     import jax
