@@ -244,6 +244,30 @@ def breakdown_lines(bd) -> list[str]:
     ]
 
 
+def separate_accelerations_lines(sa) -> list[str]:
+    """The Tsit5 program with each evaluation of the accelerations compiled apart
+    (`work_precision.separate_accelerations`), or nothing for a record without it."""
+    if not sa or "error" in sa:
+        return []
+    a, b = sa["inline"], sa["noinline"]
+    saved = a["first_cpu_s"] - b["first_cpu_s"]
+    first = f"saves {saved:.2f} s of the first call" if saved > 0 else "saves no compile time"
+    return [
+        "The accelerations compiled apart (`work_precision.separate_accelerations`, a new "
+        "process each, no cache, CPU seconds): with each evaluation of the step's "
+        "accelerations a separate computation by `equinox.internal.noinline`, the first "
+        f"call (trace, compile and run) takes {b['first_cpu_s']:.2f} s against "
+        f"{a['first_cpu_s']:.2f} s inlined, and a warm call {b['warm_cpu_s']:.3g} s against "
+        f"{a['warm_cpu_s']:.3g} s ({b['warm_cpu_s'] / a['warm_cpu_s']:.0f}×; the same slider "
+        f"error, {b['error_m']:.2e} m against {a['error_m']:.2e} m). equinox runs the separate "
+        "computation through a host callback, so each evaluation in a step leaves "
+        f"the compiled loop for Python: it {first} and costs every later call. Not used (a "
+        "nested `jax.jit` is no alternative: it lowers to a call that XLA's CPU compiler "
+        "inlines).",
+        "",
+    ]
+
+
 def program_parts_lines(pp) -> list[str]:
     """What XLA compiles in the Tsit5 program and what each part costs it
     (`work_precision.program_parts`), or nothing for a record without it."""
@@ -505,6 +529,7 @@ def render(record, wp, targets, *, command, cut) -> str:
     lines.append("")
     lines += breakdown_lines(wp.get("breakdown"))
     lines += program_parts_lines(wp.get("program_parts"))
+    lines += separate_accelerations_lines(wp.get("separate_accelerations"))
     lines += generalized_alpha_lines(wp.get("generalized_alpha_step"), rows)
     if b:
         lines += [

@@ -291,6 +291,59 @@ def _compile_phases() -> dict:
     return totals
 
 
+def separate_accelerations_child(mode: str, rtol: float = 1e-5, root: str = ".") -> dict:
+    """In a new process (`python -m benchmarks.work_precision separate-accelerations MODE`),
+    no persistent cache: `breakdown`'s Tsit5 run (4001 saved times, q and q̇), its first call
+    (trace, lower, compile, run) and its fastest of 5 warm calls, CPU seconds. `mode`
+    "noinline": each evaluation of the accelerations in the step (`index1.
+    stabilised_accelerations`: the stages and the step's end) made a separately compiled
+    computation by `equinox.internal.noinline`, the mechanism that issue reports on JAX ODE
+    solvers' compile time point to (equinox lowers it to a host callback into a separately
+    jitted function); "inline": the program as it is."""
+    import jax
+
+    if mode == "noinline":
+        import equinox.internal as eqxi
+
+        from jaxdeploy.solvers import index1
+
+        def accelerations(mechanism, q, v, t, memory, baumgarte, linear_solve):
+            return mechanism.accelerations(q, v, t, memory, baumgarte, linear_solve)
+
+        separate = eqxi.noinline(accelerations)
+        index1.stabilised_accelerations = lambda *args: separate(*args)
+    elif mode != "inline":
+        raise ValueError(f"mode = {mode!r}: 'inline' or 'noinline'")
+    ts, x_ref = load_reference(root)
+    ours = _Ours(ts)
+    run = ours.call(Config("", "jaxdeploy", "tsit5", rtol=rtol, outputs="motion"))
+    cpu = time.process_time()
+    x, _, status = run()
+    first = time.process_time() - cpu
+    warm = []
+    for _ in range(5):
+        cpu = time.process_time()
+        jax.block_until_ready(run()[0])
+        warm.append(time.process_time() - cpu)
+    return {"mode": mode, "first_cpu_s": first, "warm_cpu_s": min(warm), "status": status,
+            "error_m": float(np.max(np.abs(x - x_ref)))}  # fmt: skip
+
+
+def separate_accelerations(root: str = ".") -> dict:
+    """`separate_accelerations_child` in both modes, one new process each."""
+    out = {}
+    for mode in ("inline", "noinline"):
+        paths = [os.path.abspath(root), os.environ.get("PYTHONPATH")]
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in paths if p)}
+        command = [sys.executable, "-m", "benchmarks.work_precision", "separate-accelerations",
+                   mode, "--root", root]  # fmt: skip
+        done = subprocess.run(command, env=env, capture_output=True, text=True, cwd=root)
+        if done.returncode != 0:
+            return {"error": f"{mode}: {done.stderr[-2000:]}"}
+        out[mode] = json.loads(done.stdout.strip().splitlines()[-1])
+    return out
+
+
 def new_process_first_calls(solver: str, rtol: float, root: str = ".") -> dict:
     """`first_call_child` twice with one new cache folder: empty (`cold`), then filled by the
     first run (`cached`)."""
@@ -367,6 +420,7 @@ def measure(quick: bool = False, repeats: int = 3, log=print, root: str = ".") -
         "new_process": new_process,
         "breakdown": breakdown(ours, ts, repeats=5 if quick else 20),
         "program_parts": program_parts(ours, ts),
+        "separate_accelerations": separate_accelerations(root),
         "generalized_alpha_step": None if quick else generalized_alpha_operations(ours, ts),
         "rows": [asdict(r) for r in rows],
     }
@@ -560,14 +614,17 @@ if __name__ == "__main__":
     import argparse
 
     parser = argparse.ArgumentParser(prog="python -m benchmarks.work_precision")
-    parser.add_argument("command", choices=["first-call"])
-    parser.add_argument("solver")
-    parser.add_argument("rtol", type=float)
+    parser.add_argument("command", choices=["first-call", "separate-accelerations"])
+    parser.add_argument("solver", help="first-call: the solver; separate-accelerations: the mode")
+    parser.add_argument("rtol", type=float, nargs="?", default=1e-5)
     parser.add_argument("--root", default=".")
     args = parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
-    print(json.dumps(first_call_child(args.solver, args.rtol, args.root)))
+    if args.command == "first-call":
+        print(json.dumps(first_call_child(args.solver, args.rtol, args.root)))
+    else:
+        print(json.dumps(separate_accelerations_child(args.solver, args.rtol, args.root)))
 
 
 def generalized_alpha_operations(ours, ts) -> dict:
