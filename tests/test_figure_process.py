@@ -5,8 +5,11 @@ message, and a process that was sent nothing ends without writing. Counts and fi
 times."""
 
 import json
+import os
 import subprocess
 import sys
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -69,6 +72,61 @@ def test_a_process_sent_nothing_ends_without_writing(tmp_path):
     drawing.close()
     assert process.poll() is not None
     assert not list(tmp_path.iterdir())
+
+
+def _group_alive(pgid: int) -> list[int]:
+    """The processes of group `pgid` that are not zombies (Linux's /proc)."""
+    alive = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                stat = f.read()
+        except OSError:  # ended meanwhile
+            continue
+        state, _ppid, group = stat.rsplit(")", 1)[1].split()[:3]
+        if int(group) == pgid and state != "Z":
+            alive.append(int(entry))
+    return alive
+
+
+# figures.py with one more drawing of two figures, the second of which (drawn by the forked
+# copy) takes a minute: a copy that outlives `close` is then seen, however fast the machine.
+_SLOW_FIGURES = """
+import runpy, sys, time
+figures = runpy.run_path({path!r})
+figures["DRAWINGS"]["slow"] = (lambda data, out: [], lambda data, out: time.sleep(60) or [])
+sys.exit(figures["serve"]())
+"""
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="reads process groups in /proc")
+def test_closing_ends_the_forked_copy_that_draws_beside(tmp_path, monkeypatch):
+    # A refusal or Ctrl-C while the figures are drawn: the figure process and the copy it
+    # forked for every second figure (`draw_side_by_side`) both end at once.
+    from jaxdeploy.commands import _figures
+
+    script = tmp_path / "slow_figures.py"
+    script.write_text(_SLOW_FIGURES.format(path=FIGURES_PY))
+    monkeypatch.setattr(_figures, "FIGURES_PY", str(script))
+    drawing = FigureProcess()
+    drawing.start()
+    pgid = drawing._process.pid
+    assert os.getpgid(pgid) == pgid  # a session, and so a group, of its own
+    drawing.send("slow", {}, str(tmp_path))
+    deadline = time.monotonic() + 60.0
+    while len(_group_alive(pgid)) < 2:  # until the copy is drawing
+        assert time.monotonic() < deadline, "the figure process never forked its copy"
+        time.sleep(0.005)
+    closing = threading.Thread(target=drawing.close, daemon=True)
+    closing.start()
+    closing.join(10.0)  # waiting for the copy's minute would be a hang (it holds the pipe)
+    assert not closing.is_alive(), "close() waits for the forked copy"
+    deadline = time.monotonic() + 10.0
+    while _group_alive(pgid):
+        assert time.monotonic() < deadline, f"still running: {_group_alive(pgid)}"
+        time.sleep(0.01)
 
 
 def test_without_a_process_the_figures_are_drawn_here(tmp_path):

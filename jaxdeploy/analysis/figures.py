@@ -275,7 +275,7 @@ if __name__ == "__main__":
     import signal
     import sys
 
-    # Ctrl-C reaches the whole process group: the command says what happened and removes
-    # what was unfinished; this process just ends.
+    # The command ends this process's group (its session: commands/_figures.py) on Ctrl-C,
+    # a refusal or an error, and removes what was unfinished; a SIGINT sent here just ends it.
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     sys.exit(serve())

@@ -10,6 +10,11 @@ loads and runs its programs, then draws from
 the numbers the analysis computed (`Analysis.plot_data`, sent pickled on its standard input)
 while the command writes its other files. Where no second process can be started, the
 figures are drawn in this one, as before.
+
+The process starts a session of its own (where the system has them), so that `close` can end
+it together with the copy of it that draws every second figure (`analysis.figures.
+draw_side_by_side` forks one): a refused or interrupted run leaves no drawing behind. A Ctrl-C
+at the terminal then reaches the command alone, which closes the figure process on its way out.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ import functools
 import os
 import pickle
 import runpy
+import signal
 import subprocess
 import sys
 import threading
@@ -29,6 +35,8 @@ FIGURES_PY = os.path.join(os.path.dirname(os.path.dirname(__file__)), "analysis"
 # Runs figures.py as __main__ without putting its folder on sys.path (`-P`; runpy does not
 # add a file's folder either): the package's modules must not shadow the libraries' names.
 _BOOT = "import runpy, sys; runpy.run_path(sys.argv[1], run_name='__main__')"
+# Process groups to end the figure process with the copy it forks (POSIX).
+_SESSIONS = hasattr(os, "killpg") and hasattr(os, "setsid")
 
 
 @functools.cache
@@ -70,6 +78,7 @@ class FigureProcess:
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 stderr=subprocess.PIPE,
+                start_new_session=_SESSIONS,
             )
         except OSError:
             self._process = None
@@ -109,7 +118,13 @@ class FigureProcess:
         process, self._process = self._process, None
         if process is None:
             return
-        process.kill()
+        if _SESSIONS:  # the process and its forked copy, if one is drawing
+            try:
+                os.killpg(process.pid, signal.SIGKILL)
+            except ProcessLookupError:  # both ended already
+                pass
+        else:
+            process.kill()
         if self._thread is not None:
             self._thread.join()
         else:
