@@ -268,3 +268,26 @@ def test_devices_asked_for_after_jax_started_are_refused(tmp_path, capsys):
                  "--devices", str(other)])  # fmt: skip
     err = capsys.readouterr().err
     assert code == 2 and f"JAX already runs in this process with {jax.device_count()}" in err
+
+
+@pytest.mark.slow  # ~100 s on 2 cores: compiles deploy_array's batched run and its probe
+def test_a_sharded_deploy_array_sweep_finishes(tmp_path):
+    """deploy_array sharded over two host devices, as `jaxdeploy sweep` runs it by default
+    on two cores. With the saved accelerations solved after the loop (`batch_function`'s
+    default, `simulate`'s `batch_saved_accelerations`) this hung in the run-length probe,
+    every XLA thread idle: deploy_array's solve is LAPACK's `potrf` (its Schur complement
+    exceeds `saddle_point.UNROLLED_MAX_SIZE`), batched there over every saved time, and the
+    same run unrolled finished. `jaxdeploy.sweep` solves them in the loop when it shards.
+    A hang fails here at the timeout instead of stalling the suite."""
+    env = _env(tmp_path / "cache")
+    env["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "jaxdeploy.cli", "sweep", "--scene", "deploy_array",
+               "--grid", "spring_stiffness=1.2:1.8:4", "--t-end", "0.1", "--long-run",
+               "--quiet", "--out", str(out)]  # fmt: skip
+    # 24 s here; without the guard it was still waiting after 200 s (18 CPU-s, then idle).
+    done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert len(manifest["devices"]) == 2
+    assert sorted(load_sweep(str(out))["case"]) == [0, 1, 2, 3]  # every case, once
