@@ -12,7 +12,7 @@ import pytest
 from jaxdeploy import StepControl, get_scene
 from jaxdeploy.batch import run_scene
 from jaxdeploy.solvers import step_maxima, step_maximum
-from jaxdeploy.solvers.episodes import SAMPLES
+from jaxdeploy.solvers.episodes import PARABOLIC, SAMPLES, _refined
 
 
 def test_step_maximum_finds_an_interior_peak_and_differentiates_by_the_envelope_theorem():
@@ -69,6 +69,47 @@ def test_step_maxima_refines_each_component_as_step_maximum_does_alone():
     np.testing.assert_allclose(np.asarray(t_star[:2]), [math.pi / 14, 0.81], atol=1e-8)
     np.testing.assert_allclose(np.asarray(peaks), [1.0, 0.0, 1.0], atol=1e-15)
     assert float(t_star[2]) == 0.0
+
+
+def test_skipping_idle_parabolic_steps_changes_no_bit():
+    """`_refined` skips its steps when the first vertex is of no use to any row: the same
+    points and heights as running every step, on rows where a vertex is usable (interior
+    peaks), where none is (monotone, linear, convex, flat) and on mixed batches."""
+    rng = np.random.default_rng(7)
+
+    def rows(functions):
+        def f_each(t):
+            return jnp.stack([g(t[i]) for i, g in enumerate(functions)])
+
+        samples = jnp.linspace(0.0, 1.0, SAMPLES + 1)
+        values = np.stack([np.asarray(jax.vmap(g)(samples)) for g in functions], axis=1)
+        k = np.argmax(values, axis=0)
+        lo, hi = samples[np.maximum(k - 1, 0)], samples[np.minimum(k + 1, SAMPLES)]
+        around = np.clip(k, 1, SAMPLES - 1)[:, None] + np.arange(-1, 2)[None, :]
+        heights = jnp.asarray(np.take_along_axis(values.T, around, axis=1))
+        return f_each, samples[around], heights, lo, hi
+
+    families = [
+        lambda c: lambda t: -((t - c) ** 2),  # a peak at c: usable when c is inside
+        lambda c: lambda t: c * t,  # linear: no vertex
+        lambda c: lambda t: jnp.exp(c * t),  # convex and monotone
+        lambda c: lambda t: jnp.tanh(8.0 * (t - c)),  # a step: flat ends
+        lambda c: lambda t: jnp.sin(9.0 * t + 10.0 * c),
+    ]
+    skipped = refined = 0
+    for _ in range(40):
+        chosen = rng.choice(len(families), size=2)
+        functions = [families[i](float(rng.uniform(-0.3, 1.3))) for i in chosen]
+        f_each, points, heights, lo, hi = rows(functions)
+        every = _refined(f_each, points, heights, lo, hi, PARABOLIC, skip_idle=False)
+        skipping = _refined(f_each, points, heights, lo, hi, PARABOLIC)
+        for a, b in zip(every, skipping, strict=True):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        moved = not np.array_equal(np.asarray(every[0]), np.asarray(points))
+        refined += moved
+        skipped += not moved
+    # Both branches were taken: the comparison is not vacuous.
+    assert skipped > 0 and refined > 0
 
 
 def test_hertz_impact_episode_against_johnsons_closed_forms():
