@@ -210,19 +210,29 @@ def batch_function(
     runs until its slowest case converges, so smaller groups waste less on stragglers, and
     their arrays stay in cache; `None` (default) vmaps all cases at once.
 
-    Generalized-α runs with Newton's method proper in a batch (`vmapped_control`), and the
-    saved times' q̈ and λ are solved after the loop, vmapped over the saved times
-    (`simulate`'s `batch_saved_accelerations`, unless `simulate_options` say otherwise): the
-    same values to rounding, 17 % less per simulation in the bench's 256-case batch.
+    Generalized-α runs with Newton's method proper in a batch (`vmapped_control`), and
+    unsharded the saved times' q̈ and λ are solved after the loop, vmapped over the saved
+    times (`simulate`'s `batch_saved_accelerations`, unless `simulate_options` say
+    otherwise): the same values to rounding, 17 % less per simulation in the bench's 256-case
+    batch.
 
     `sharding` (a `NamedSharding` over a 1-D mesh, as `jaxdeploy.sweep` places its inputs):
     each device runs the policy on its own shard of the cases (`jax.shard_map`), with no
-    communication (groups or the vmap are per device).
+    communication (groups or the vmap are per device). Sharded, the saved q̈ and λ are solved
+    inside the loop, and `batch_saved_accelerations=True` is refused: so solved after the
+    loop, deploy_array's sweep over two host devices hung (jax 0.10.2: a large batched LAPACK
+    Cholesky per device, every XLA thread idle; tests/test_sweep.py).
     """
     check_policy(group_size)
     control, simulate_options = _control_and_options(scene, control, simulate_options)
     control = vmapped_control(control)
-    simulate_options = {"batch_saved_accelerations": True, **simulate_options}
+    simulate_options = {"batch_saved_accelerations": sharding is None, **simulate_options}
+    if sharding is not None and simulate_options["batch_saved_accelerations"] is True:
+        raise ValueError(
+            "batch_saved_accelerations=True cannot be combined with sharding: solved after "
+            "the loop on several host devices the saved accelerations can hang the run; "
+            "leave it out (sharded batches solve them inside the loop)"
+        )
 
     def params_of(varied_values):
         return {**shared, **dict(zip(varied, varied_values, strict=True))}

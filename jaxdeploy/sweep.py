@@ -233,11 +233,6 @@ def sweep(
         evaluate=_wrap(evaluate),
         sharding=setup.sharding,
         energy_meter=energy_meter,
-        # Sharded over two host devices, deploy_array's sweep hung in its run-length probe
-        # with the saved accelerations solved after the loop (`batch_function`'s default;
-        # jax 0.10.2, every XLA thread idle, not diagnosed): sharded, they are solved in the
-        # loop, as before.
-        batch_saved_accelerations=setup.sharding is None,
         **_policy_options(setup.policy),
     )
     if probe is not None and todo:

@@ -5,7 +5,7 @@ import jax
 import numpy as np
 import pytest
 
-from jaxdeploy.batch import run_scene, simulate_batch
+from jaxdeploy.batch import batch_function, run_scene, simulate_batch
 from jaxdeploy.scenes import DeployArray, Pendulum
 
 
@@ -37,6 +37,26 @@ def test_bad_cases_are_refused_before_tracing():
         simulate_batch(Pendulum(), {"length": [1.0, 2.0], "mass": [1.0]}, 0.1)
     with pytest.raises(ValueError, match="empty"):
         simulate_batch(Pendulum(), [], 0.1)
+
+
+def test_sharded_batches_refuse_accelerations_solved_after_the_loop():
+    """Sharded, `batch_function` solves the saved q̈ and λ in the loop (after it, on two host
+    devices, deploy_array's sweep hung: tests/test_sweep.py), and an explicit request for
+    the other is refused by name before anything is traced."""
+    mesh = jax.sharding.Mesh(np.array(jax.devices()[:1]), ("cases",))
+    sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("cases"))
+    scene, shared = Pendulum(), Pendulum().resolve_params({})
+    shared.pop("length")
+    with pytest.raises(ValueError, match="batch_saved_accelerations=True cannot be combined"):
+        batch_function(scene, ("length",), shared, 0.1, np.linspace(0.0, 0.1, 3),
+                       sharding=sharding, batch_saved_accelerations=True)  # fmt: skip
+    run = batch_function(scene, ("length",), shared, 0.1, np.linspace(0.0, 0.1, 3),
+                         sharding=sharding)  # fmt: skip
+    lengths = jax.device_put(np.array([1.0, 2.0]), sharding)
+    sharded = run((lengths,))
+    alone = simulate_batch(scene, {"length": [1.0, 2.0]}, 0.1, ts=np.linspace(0.0, 0.1, 3))
+    np.testing.assert_allclose(np.asarray(sharded.qdd), np.asarray(alone.trajectory.qdd),
+                               rtol=1e-12, atol=1e-12)  # fmt: skip
 
 
 @pytest.mark.slow  # 17 s of the default suite at 844cb65 (2 cores): kept out of it

@@ -277,7 +277,7 @@ def test_a_sharded_deploy_array_sweep_finishes(tmp_path):
     default, `simulate`'s `batch_saved_accelerations`) this hung in the run-length probe,
     every XLA thread idle: deploy_array's solve is LAPACK's `potrf` (its Schur complement
     exceeds `saddle_point.UNROLLED_MAX_SIZE`), batched there over every saved time, and the
-    same run unrolled finished. `jaxdeploy.sweep` solves them in the loop when it shards.
+    same run unrolled finished. `batch_function` solves them in the loop when it shards.
     A hang fails here at the timeout instead of stalling the suite."""
     env = _env(tmp_path / "cache")
     env["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
