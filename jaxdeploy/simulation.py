@@ -346,10 +346,9 @@ def _acceleration_inputs(t, y, args):
 
 def _dense_acceleration_inputs(t, dense):
     """A saved state as `outputs="all"` with `batch_saved_accelerations` keeps it in the
-    loop: without its q̈ and λ (the
-    dense output's acceleration solve is not traced), with the memory they are solved with
-    (the step's: `acceleration_inputs`). `_with_accelerations` solves them after the loop,
-    for every saved time at once."""
+    loop: without its q̈ and λ (the dense output's acceleration solve is not traced), with
+    the memory they are solved with (the step's: `acceleration_inputs`).
+    `_with_accelerations` solves them after the loop, for every saved time at once."""
     q, v, memory, step_memory = dense.acceleration_inputs(t)
     return MechanismState(q, v, None, None, memory), step_memory
 
@@ -369,24 +368,19 @@ def _with_accelerations(mechanism, saved, ts, y0, linear_solve):
     state, memory = saved
     reached = jnp.isfinite(ts)
 
-    def at_reached(x, x0):
+    def where_reached(x, other):  # x at the reached times, `other` (broadcast) elsewhere
         mask = reached.reshape(reached.shape + (1,) * (x.ndim - 1))
-        return jnp.where(mask, x, jnp.broadcast_to(x0, x.shape))
+        return jnp.where(mask, x, jnp.broadcast_to(other, x.shape))
 
-    q, v = at_reached(state.q, y0.q), at_reached(state.v, y0.v)
-    memory = jax.tree.map(at_reached, memory, y0.memory)
+    q, v = where_reached(state.q, y0.q), where_reached(state.v, y0.v)
+    memory = jax.tree.map(where_reached, memory, y0.memory)
     t = jnp.where(reached, ts, jnp.zeros_like(ts))
 
     def solve(q, v, t, memory):
         return accelerations_at(mechanism, q, v, t, memory, linear_solve)
 
     qdd, lam = jax.vmap(solve)(q, v, t, memory)
-
-    def unreached_inf(x):
-        mask = reached.reshape(reached.shape + (1,) * (x.ndim - 1))
-        return jnp.where(mask, x, jnp.inf)
-
-    return state._replace(qdd=unreached_inf(qdd), lam=unreached_inf(lam))
+    return state._replace(qdd=where_reached(qdd, jnp.inf), lam=where_reached(lam, jnp.inf))
 
 
 def _saved_linear_solve(solver) -> str:
