@@ -284,6 +284,14 @@ def tree(tmp_path):
     _git(tmp_path, "checkout", "-qb", "gone")
     (tmp_path / "docs" / "extra.md").write_text("# extra\n")
     dead = commit("rebased away")
+    # A word of hex letters alone ("bcddcef") is prose, not a commit, to the scan: with a
+    # hash that happens to start so (about 1 in 1000), the checks below had nothing to find.
+    for attempt in range(100):
+        if any(c.isdigit() for c in dead[:7]):
+            break
+        _git(tmp_path, "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q", "--amend",
+             "-m", f"rebased away ({attempt})")  # fmt: skip
+        dead = _git(tmp_path, "rev-parse", "HEAD").stdout.strip()
     _git(tmp_path, "checkout", "-q", "-")
     _git(tmp_path, "branch", "-qD", "gone")
     return tmp_path, live, dead
