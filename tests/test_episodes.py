@@ -112,6 +112,31 @@ def test_skipping_idle_parabolic_steps_changes_no_bit():
     assert skipped > 0 and refined > 0
 
 
+def test_a_run_with_idle_refinements_skipped_is_bit_for_bit_the_run_with_all(monkeypatch):
+    """The skip inside a whole run: slider_crank over 4 ms (impacts and contact phases, the
+    scene's default control) with `_refined` skipping idle steps and with it running every
+    step: the same episode log, extremes and saved states, bit for bit."""
+    import functools
+
+    from jaxdeploy.solvers import episodes as episodes_module
+
+    scene = get_scene("slider_crank")
+    params = scene.resolve_params({})
+
+    def run():
+        jax.clear_caches()  # the monkeypatched `_refined` is read while tracing
+        trajectory = run_scene(scene, params, 4e-3, n_save=41)
+        return jax.tree.map(np.asarray, (trajectory.q, trajectory.episodes, trajectory.extremes))
+
+    skipping = run()
+    every = functools.partial(episodes_module._refined, skip_idle=False)
+    monkeypatch.setattr(episodes_module, "_refined", every)
+    all_steps = run()
+    assert int(skipping[1].count.sum()) > 0  # contact episodes were logged
+    for a, b in zip(jax.tree.leaves(skipping), jax.tree.leaves(all_steps), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_hertz_impact_episode_against_johnsons_closed_forms():
     scene = get_scene("impact")  # undamped Hertz: Johnson's closed forms hold
     params = scene.resolve_params({})
