@@ -433,34 +433,37 @@ def test_cli_fit_recovers_deploy_array_contact_parameters(tmp_path):
     assert report["not_identified"] == [] and report["adequate"]
 
 
-def test_the_tighter_tolerance_program_compiled_ahead_is_the_one_the_check_calls():
-    """`Model.compile_ahead`: the program of rtol/10 (another method: "auto" takes Dopri8
-    below rtol 1e-8, Tsit5 at it) is traced and compiled in a second thread; the check's
-    call waits for it, traces nothing itself and gives what a model without the thread
-    gives. A control that shares the model's program starts no thread."""
+def test_the_check_at_a_tighter_tolerance_keeps_the_method_and_compiles_nothing():
+    """`_schedule.tighter`: rtol and atol 10x smaller with the method resolved at the looser
+    rtol ("auto" takes Tsit5 at rtol 1e-8, Dopri8 below it), so the check's run is the
+    model's compiled program with other data: the call at the tighter tolerance traces
+    nothing, and gives what a new model, compiled for that control alone, gives. Without
+    the method kept the tighter control would resolve to Dopri8 (asserted first), a second
+    program."""
     import threading
 
     import jax
 
     from jaxdeploy.fit._fit import Model
-    from jaxdeploy.fit._schedule import _scaled
+    from jaxdeploy.fit._schedule import _scaled, tighter
+    from jaxdeploy.solvers import AUTO_TIGHT_RTOL
 
     scene = Impact(damping="lankarani_nikravesh")
     base = scene.resolve_params({})
     params = make_parameters(scene, ["restitution=0.6:0.05:0.99"], scene.resolve_params({}))
     ts = np.linspace(0.0, 6e-4, 31)
+    control = {"solver": "auto", "rtol": AUTO_TIGHT_RTOL, "atol": 1e-12}
 
     def model():
-        return Model(scene, params, base, ["journal_x"], ts, {"solver": "auto"}, {})
+        return Model(scene, params, base, ["journal_x"], ts, control, {})
 
-    ahead, plain = model(), model()
-    tight = _scaled(ahead.control, 0.1)
-    assert tight.resolved_solver() != ahead.control.resolved_solver()
-    ahead.compile_ahead(_scaled(ahead.control, 2.0), np.zeros(1))  # the same program
-    assert ahead._ahead is None
-    ahead.compile_ahead(tight, np.zeros(1))
-    assert ahead._ahead is not None
+    compiled, fresh = model(), model()
+    tight = tighter(compiled.control)
+    assert _scaled(compiled.control, 0.1).resolved_solver() != compiled.control.resolved_solver()
+    assert tight.resolved_solver() == compiled.control.resolved_solver() == "tsit5"
+    assert (tight.rtol, tight.atol) == pytest.approx((AUTO_TIGHT_RTOL / 10, 1e-13))
     z = np.array([0.3])
+    compiled(z)  # the model's own program, traced and compiled here
     here, traces = threading.current_thread(), []
 
     def listener(event, _seconds, **kwargs):
@@ -474,12 +477,12 @@ def test_the_tighter_tolerance_program_compiled_ahead_is_the_one_the_check_calls
             traces.append(event)
 
     jax.monitoring.register_event_duration_secs_listener(listener)
-    try:  # at once, while the thread traces or compiles the program: this call waits for it
-        channels, jac, ok = ahead(z, control=tight)
+    try:
+        channels, jac, ok = compiled(z, control=tight)
     finally:  # only this listener: other tests' stay registered
         jax.monitoring.unregister_event_duration_listener(listener)
     assert traces == []
-    expected = plain(z, control=tight)
+    expected = fresh(z, control=tight)
     assert ok and expected[2]
     np.testing.assert_array_equal(channels["journal_x"], expected[0]["journal_x"])
     np.testing.assert_array_equal(jac["journal_x"], expected[1]["journal_x"])

@@ -22,7 +22,8 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from ._schedule import RTOL_FLOOR, _scaled
+from ._schedule import RTOL_FLOOR
+from ._schedule import tighter as tighter_control
 
 # The default largest relative change of a derivative between rtol and rtol/10. A gradient
 # check judging at 1 % needs its AD converged well inside that (it must not be the AD's own
@@ -117,7 +118,7 @@ def converged_tolerance(
     for _ in range(max_tightenings):
         if current.rtol / 10.0 < RTOL_FLOOR * (1 - 1e-9):
             break
-        tighter = _scaled(current, 0.1)
+        tighter = tighter_control(current)
         say(f"derivatives at rtol {tighter.rtol:.0e} (is rtol {current.rtol:.0e} converged?)")
         tight = evaluate(tighter)
         change = relative_change(derivatives, tight)

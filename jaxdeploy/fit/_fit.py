@@ -43,7 +43,7 @@ from ._adequacy import assess
 from ._data import Measurements
 from ._parameters import FitParameter, internal_vector, make_parameters
 from ._residuals import Comparison, ResidualSpec
-from ._schedule import _scaled, tighten
+from ._schedule import tighten, tighter
 
 # A parameter whose standard error exceeds this fraction of its value is reported as not
 # identified; a pair with |correlation| above CORRELATED as confounded.
@@ -299,7 +299,6 @@ class Model:
             simulate_options = {"replay_steps": True, **simulate_options}
 
         self.ts = ts
-        self._ahead = None  # the thread of `compile_ahead`
 
         def evaluate(z, ts_run, control):
             params = dict(fixed)
@@ -319,45 +318,14 @@ class Model:
             return model, (model, ok)
 
         # The step control's tolerances are data of the compiled programs: the tolerance
-        # check's Jacobian at a 10x tighter rtol (`tolerance_check`) compiles nothing more.
+        # check's Jacobian at a 10x tighter rtol (`tolerance_check`, with the method kept:
+        # `_schedule.tighter`) compiles nothing more.
         self._jac = tolerances_as_data(
             lambda c, z, t: jax.jacfwd(lambda w: evaluate(w, t, c), has_aux=True)(z)
         )
         self._batch = tolerances_as_data(
             lambda c, zs, t: jax.vmap(lambda z: evaluate(z, t, c)[1])(zs)
         )
-
-    def compile_ahead(self, control, z) -> None:
-        """Compile the Jacobian program of `control` (a `StepControl` differing from the
-        model's in its tolerances) in a second thread, by one evaluation at the internal point
-        `z` whose result is dropped; a call with another control than the model's meanwhile
-        waits for the thread (`__call__`), so that it finds the program compiled. (Two
-        threads that call one `jax.jit` function usually trace and compile it once, but not
-        always: on jax 0.10.2 a test that relied on it failed in two of four runs of the
-        fast suite, with the second thread tracing the program itself.)
-        Nothing is started when `control` shares the model's program: the
-        tolerances are data (`tolerances_as_data`), and only an automatic solver choice
-        that resolves to another method at `control`'s rtol makes a second program.
-
-        Why: a fit that checks its tolerance between stages (`fit`'s `model_error`) needs the
-        program of the 10x tighter tolerance after its first stage. slider_crank's fit at rtol
-        1e-8 (Tsit5) checks at 1e-9 (Dopri8): two programs of ~9.5 s of tracing and XLA
-        compiling each, one after the other on one core while the other was idle."""
-        import threading
-
-        if self._ahead is not None or control.resolved_solver() == self.control.resolved_solver():
-            return
-        z, ts = np.asarray(z, dtype=float), self.save_times()
-
-        def compile_program():
-            try:
-                self._jac(control, z, ts)
-            except Exception:  # noqa: BLE001 - the run's own call of the program raises it
-                pass
-
-        # Not a daemon: a process that ends while XLA compiles in a daemon thread aborts.
-        self._ahead = threading.Thread(target=compile_program, name="fit-compile-ahead")
-        self._ahead.start()
 
     def save_times(self, n: int | None = None) -> np.ndarray:
         """The first `n` save times, padded with the last of them to the compiled length."""
@@ -379,8 +347,6 @@ class Model:
         `{name: (N, p)}`, of which the first `n` samples are the save times. `control`: a
         `StepControl` differing from the model's in its tolerances (default the model's)."""
         control = self.control if control is None else control
-        if self._ahead is not None and control is not self.control:
-            self._ahead.join()  # `compile_ahead`: the program is being compiled there
         jac, (model, ok) = self._jac(control, np.asarray(z, dtype=float), self.save_times(n))
         model = {n: np.asarray(v) for n, v in model.items()}
         jac = {n: np.asarray(v) for n, v in jac.items()}
@@ -665,10 +631,6 @@ def fit(
     compiled = Model(scene, params, base, longest.names, longest.ts, control, simulate_options)
     control = compiled.control
     recheck = model_error is not None and control.rtol is not None and longest.noise_known
-    if recheck and len(specs) > 1:
-        # The check before the second stage runs the model at rtol/10 (`tolerance_at_estimate`):
-        # its program is compiled on the other core while the first stage compiles and fits.
-        compiled.compile_ahead(_scaled(control, 0.1), z)
     k = 0
     while k < len(specs):
         tolerance = None
@@ -851,7 +813,7 @@ def tolerance_check(result: FitResult, scene, fixed: Mapping, control) -> dict:
     the estimates is a linearisation: far beyond one standard error read it as "large", not
     as a number). Stored in `result.tolerance` and returned."""
     from ..batch import step_control
-    from ._schedule import _scaled, model_difference, run_channels
+    from ._schedule import model_difference, run_channels
 
     cmp_ = result.comparison
     control = step_control(scene, control)
@@ -861,7 +823,7 @@ def tolerance_check(result: FitResult, scene, fixed: Mapping, control) -> dict:
         record["note"] = "fixed step: no tolerance to tighten"
         result.tolerance = record
         return record
-    tight = _scaled(control, 0.1)
+    tight = tighter(control)
     record.update(rtol_check=tight.rtol, atol_check=tight.atol)
     jac_tight = None
     if result.model is not None and result.z is not None:
@@ -961,7 +923,6 @@ def refit_until_reproducible(
     import dataclasses
 
     from ..batch import step_control
-    from ._schedule import _scaled
 
     control = step_control(scene, control)
     spec = residuals if residuals is not None else result.comparison.spec
@@ -972,7 +933,7 @@ def refit_until_reproducible(
         and control.rtol * 0.01 >= floor * (1 - 1e-9)
     ):
         start = time.perf_counter()
-        control = _scaled(control, 0.1)
+        control = tighter(control)
         params = [dataclasses.replace(p, guess=result.estimates[p.name]) for p in result.parameters]
         offset = len(result.stages)
 
