@@ -319,15 +319,36 @@ class Scatter:
 
 class BatchObjective:
     """J for a batch of designs `{name: (B,)}` as one compiled vmapped run (the program is
-    compiled once per batch size)."""
+    compiled once per batch size).
 
-    def __init__(self, problem: DesignProblem):
+    `devices` (default: every JAX device, `jax.devices()`): the batch is split over them, each
+    device running its share of the designs as one vmap (`jax.shard_map`, no communication),
+    so that on a CPU split into one device per core (`jaxdeploy optimize`'s `--devices`) the
+    shares run side by side. A batch that does not divide evenly is padded with copies of its
+    last design, whose results are dropped. One device: a plain vmap. A vmapped case's last
+    bits depend on its batch, so a design's J can differ by round-off between device counts."""
+
+    def __init__(self, problem: DesignProblem, devices=None):
         self.problem = problem
-        self._run = jax.jit(jax.vmap(problem.evaluate))
+        self.devices = list(jax.devices() if devices is None else devices)
+        run = jax.vmap(problem.evaluate)
+        if len(self.devices) > 1:
+            mesh = jax.sharding.Mesh(np.array(self.devices), ("designs",))
+            spec = jax.sharding.PartitionSpec("designs")
+            run = jax.shard_map(run, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)
+        self._run = jax.jit(run)
 
     def __call__(self, designs: Mapping) -> tuple[np.ndarray, dict, np.ndarray]:
-        values, parts, ok = self._run({k: jnp.asarray(v, dtype=float) for k, v in designs.items()})
-        return np.asarray(values), {k: np.asarray(v) for k, v in parts.items()}, np.asarray(ok)
+        designs = {k: np.asarray(v, dtype=float) for k, v in designs.items()}
+        size = len(next(iter(designs.values())))
+        padded = -(-size // len(self.devices)) * len(self.devices)
+        pad = padded - size
+        inputs = {
+            k: jnp.asarray(np.concatenate([v, np.repeat(v[-1:], pad)])) for k, v in designs.items()
+        }
+        values, parts, ok = self._run(inputs)
+        parts = {k: np.asarray(v)[:size] for k, v in parts.items()}
+        return np.asarray(values)[:size], parts, np.asarray(ok)[:size]
 
 
 def expected_objective(batch: Callable, x: Mapping, scatter: Scatter, rng) -> dict:

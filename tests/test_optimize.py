@@ -2,7 +2,11 @@
 on its boundary), the smoothed gradient estimator against the closed form for a quadratic, and
 recovery of a pendulum's length from its motion (pathwise and smoothed gradients)."""
 
+import json
 import math
+import os
+import subprocess
+import sys
 
 import jax
 import jax.numpy as jnp
@@ -14,6 +18,7 @@ from jaxdeploy.batch import run_scene
 from jaxdeploy.optimize import MACHINABLE, Box, Scatter, optimize
 from jaxdeploy.scenes import DeployArray, Pendulum
 
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BOUNDS = {"panel1_ra": MACHINABLE["ra"], "panel1_clearance": MACHINABLE["clearance"]}
 
 
@@ -246,6 +251,8 @@ def test_optimize_command_end_to_end_on_a_short_deployment(tmp_path, capsys):
     assert 0.2e-6 <= record["optimum"]["panel2_ra"] <= 6.3e-6
     assert record["seed"] == 0 and "jax" in record["versions"]
     assert record["scene_options"]["friction_roughness"] == "ploughing"
+    # Called in-process (not the command's own process), the devices are this process's.
+    assert record["scatter"]["devices"] == jax.device_count()
 
 
 # Batch and single runs decide their adaptive steps in differently compiled programs (a
@@ -393,3 +400,43 @@ def test_pathwise_optimize_runs_on_an_event_objective(tmp_path):
     first = record["history"][0]
     assert 0.5 < first["parts"]["panel1:lock_time"] < 0.6
     assert first["gradient"]["spring_stiffness"] < 0
+
+
+_SHARDED_BATCH = """
+import json
+import jax, jax.numpy as jnp, numpy as np
+from jaxdeploy.optimize import BatchObjective
+
+class Problem:  # J and its parts as DesignProblem.evaluate gives them, for one design
+    def evaluate(self, x):
+        a, b = x["a"], x["b"]
+        return a * a + jnp.sin(b), {"a": a * a, "b": jnp.sin(b)}, a > 0
+
+batch = BatchObjective(Problem())
+designs = {"a": np.array([1.0, -2.0, 3.0]), "b": np.array([0.1, 0.2, 0.3])}
+values, parts, ok = batch(designs)
+text = batch._run.lower({k: jnp.asarray(np.r_[v, v[-1]]) for k, v in designs.items()}).as_text()
+print(len(batch.devices), "shard_map" in text or "sdy.manual_computation" in text)
+print(json.dumps([values.tolist(), parts["a"].tolist(), parts["b"].tolist(), ok.tolist()]))
+"""
+
+
+@pytest.mark.parametrize("devices", [1, 2])
+def test_a_batch_of_designs_is_split_over_the_devices(devices):
+    """`BatchObjective` runs its designs over every JAX device, each device a vmap of its
+    share (`jax.shard_map`), padding a batch that does not divide evenly (3 designs on 2
+    devices) and dropping the padding's results: the values are each design's own. In a
+    new process with the CPU split into `devices` devices (JAX takes the count at start)."""
+    env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}")
+    env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    done = subprocess.run([sys.executable, "-c", _SHARDED_BATCH], env=env,
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    first, second = done.stdout.strip().split("\n")
+    assert first == f"{devices} {devices > 1}"
+    a, b = np.array([1.0, -2.0, 3.0]), np.array([0.1, 0.2, 0.3])
+    values, parts_a, parts_b, ok = json.loads(second)
+    np.testing.assert_allclose(values, a * a + np.sin(b), rtol=1e-15)
+    np.testing.assert_allclose(parts_a, a * a, rtol=1e-15)
+    np.testing.assert_allclose(parts_b, np.sin(b), rtol=1e-15)
+    assert ok == [True, False, True]

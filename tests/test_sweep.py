@@ -207,7 +207,7 @@ def test_a_sweep_uses_one_device_per_core_unless_told(tmp_path):
     (chunks run their shards side by side); `--devices N` chooses the count, and a resumed
     sweep keeps the count it was started with (its later chunks are batched as its earlier
     ones were). The environment's own setting is left alone."""
-    from jaxdeploy.commands.sweep import usable_cores
+    from jaxdeploy.commands._devices import usable_cores
 
     env = _env(tmp_path / "cache")
     del env["XLA_FLAGS"]  # the environment does not fix the device count here

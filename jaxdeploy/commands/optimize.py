@@ -21,6 +21,7 @@ from ._args import (
     scene_of,
     step_control,
 )
+from ._devices import DEVICES_HELP
 
 NAME = "optimize"
 HELP = "choose Ra, clearance (or any parameter) by gradients on a deployment objective"
@@ -136,6 +137,12 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--overwrite", action="store_true", help="replace an existing result")
     parser.add_argument("--quiet", action="store_true", help="no progress lines")
+    parser.add_argument(
+        "--devices",
+        type=integer_at_least("--devices", 1),
+        default=None,
+        help=DEVICES_HELP + "; the smoothed gradient's designs run side by side",
+    )
     add_step_control(parser)
 
 
@@ -202,9 +209,14 @@ def run(args) -> int:
     from ..io import check_output_dir, default_output_dir
     from ..objectives import parse_objective
     from ..optimize import Box, machinable_bounds
+    from ._devices import split_host
 
     # Every refusal happens here, before anything is written or compiled (the ideal
-    # reference run of `DesignProblem` is a simulation: it comes after).
+    # reference run of `DesignProblem` is a simulation: it comes after). The devices first:
+    # JAX takes their count when it starts.
+    refusal = split_host(args.devices)
+    if refusal is not None:
+        return refuse(refusal)
     try:
         scene = scene_of(args.scene, args)
     except ValueError as err:
@@ -354,6 +366,8 @@ def _optimize(args, scene, objective, bounds, fixed, x0, control, folder, began)
             "absolute": dict(smoothing.absolute),
             "pairs": smoothing.pairs,
             "nominal": dict(smoothing.nominal),
+            # The designs' devices: a vmapped design's last bits depend on its batch.
+            "devices": len(loss.devices),
         },
         "params": problem.fixed,
         "step_control": design_control.to_json(),

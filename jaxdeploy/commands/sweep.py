@@ -236,58 +236,17 @@ def run(args) -> int:
         return _write(args, plan, manifest)
 
 
-def usable_cores() -> int:
-    """The cores this process may run on (its CPU affinity where the system has one)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
-
-
 def _host_devices(args) -> str | None:
-    """Split the CPU into `--devices` JAX devices (default: one per usable core; for
-    --resume, the count the sweep in --out was started with), so that each chunk's shards run
-    side by side (what that gains: docs/performance.md, "Whole processes", by `make bench`).
-    JAX reads the count when its backend starts (`jax_num_cpu_devices`), so only a process
-    that has not run JAX yet can choose it. Where the environment already fixes the count
-    (`XLA_FLAGS=--xla_force_host_platform_device_count`, `JAX_NUM_CPU_DEVICES`), with
-    --distributed, or after JAX started, the devices are left as they are, and an explicit
-    --devices that they contradict is refused (the message names why). The default applies to
-    the command's own process only (`_compilation_cache.is_command_line`): a script or a test
-    that calls `jaxdeploy.cli.main([...])` before it runs JAX itself would otherwise have all
-    its later JAX work split over the cores too."""
-    import jax
-
-    from .._compilation_cache import is_command_line
+    """Split the CPU into `--devices` JAX devices (`_devices.split_host`: default one per
+    usable core; for --resume, the count the sweep in --out was started with), so that each
+    chunk's shards run side by side (what that gains: docs/performance.md, "Whole processes",
+    by `make bench`). With --distributed the devices are the cluster's."""
+    from ._devices import split_host
 
     if args.distributed:
         return "--devices does not apply with --distributed" if args.devices else None
-    if args.devices is None and not is_command_line():
-        return None
-    fixed = _devices_fixed_by_environment()
-    if fixed is not None:
-        if args.devices is not None:
-            return f"--devices {args.devices}: {fixed} already sets the number of CPU devices"
-        return None
-    wanted = args.devices or (_resumed_devices(args.out) if args.resume else None)
-    wanted = wanted or usable_cores()
-    try:
-        jax.config.update("jax_num_cpu_devices", wanted)
-    except RuntimeError:  # JAX's backend runs already: its devices stay
-        if args.devices is not None and args.devices != jax.device_count():
-            return (
-                f"--devices {args.devices}: JAX already runs in this process with "
-                f"{jax.device_count()} device(s); run the command in a new process"
-            )
-    return None
-
-
-def _devices_fixed_by_environment() -> str | None:
-    """The environment setting that fixes JAX's CPU device count, or None."""
-    if "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", ""):
-        return "XLA_FLAGS=--xla_force_host_platform_device_count"
-    if os.environ.get("JAX_NUM_CPU_DEVICES"):
-        return "JAX_NUM_CPU_DEVICES"
-    return None
+    resumed = _resumed_devices(args.out) if args.resume and args.devices is None else None
+    return split_host(args.devices, resumed)
 
 
 def _resumed_devices(out: str | None) -> int | None:
