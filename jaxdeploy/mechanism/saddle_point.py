@@ -33,6 +33,7 @@ results then hold NaN or inf, which the integrators report as a failed step.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 
@@ -117,11 +118,35 @@ def schur_solve(factor, rhs):
     return unrolled_cholesky_solve(factor, rhs)
 
 
+def schur_system_solve(mass_inverse, jacobian, rhs):
+    """`S⁻¹ rhs` with `S = J M⁻¹ Jᵀ` (eq. 2), factorised by `schur_factor`, and differentiated
+    implicitly: the tangent of `λ = S⁻¹ r` is
+
+        λ̇ = S⁻¹ (ṙ − Ṡ λ),    Ṡ λ = J̇ M⁻¹ Jᵀ λ + J (M⁻¹)˙ Jᵀ λ + J M⁻¹ J̇ᵀ λ           (3)
+
+    (differentiate `S λ = r`), one more solve with the same factor per direction
+    (`jax.lax.custom_linear_solve`, `symmetric=True`: reverse mode solves with `S` again).
+    Differentiating the factorisation instead costs, per direction, the tangent of the
+    Cholesky factor `L̇ = L Φ(L⁻¹ Ṡ L⁻ᵀ)`: two triangular solves with m × m right-hand sides
+    (Murray, "Differentiation of the Cholesky decomposition", arXiv:1602.07527, 2016, eq.
+    (9)), or, unrolled (`unrolled_cholesky`), the tangent of every one of its operations.
+    The values are those of `schur_solve(schur_factor(...), rhs)`: the primal computation is
+    that one (the factor is built from the primal `M⁻¹` and `J`, whose tangents enter through
+    `Ṡ λ` alone)."""
+    factor = schur_factor(jax.lax.stop_gradient(mass_inverse), jax.lax.stop_gradient(jacobian))
+
+    def schur_times(lam):
+        return jacobian @ (mass_inverse * (jacobian.T @ lam))
+
+    return jax.lax.custom_linear_solve(
+        schur_times, rhs, lambda _, b: schur_solve(factor, b), symmetric=True
+    )
+
+
 def range_space_solution(mass_inverse, jacobian, forces, rhs):
     """`(x, λ)` solving eq. (1) with `f = forces`, `g = rhs` by eq. (2): e.g. `(q̈, λ)` of
-    `M q̈ + Jᵀ λ = Q`, `J q̈ = γ`."""
-    factor = schur_factor(mass_inverse, jacobian)
-    lam = schur_solve(factor, jacobian @ (mass_inverse * forces) - rhs)
+    `M q̈ + Jᵀ λ = Q`, `J q̈ = γ`. Differentiated implicitly (`schur_system_solve`)."""
+    lam = schur_system_solve(mass_inverse, jacobian, jacobian @ (mass_inverse * forces) - rhs)
     return mass_inverse * (forces - jacobian.T @ lam), lam
 
 
@@ -141,5 +166,5 @@ def least_change_correction(mass_inverse, jacobian, residual):
     """The mass-weighted smallest `Δ` with `J Δ = residual`: `Δ = M⁻¹ Jᵀ S⁻¹ residual`
     (eq. 1 with `f = 0`, `g = −residual`, up to sign). Subtracting it from a state whose
     constraint residual is `residual` removes that residual to first order."""
-    lam = schur_solve(schur_factor(mass_inverse, jacobian), residual)
+    lam = schur_system_solve(mass_inverse, jacobian, residual)
     return mass_inverse * (jacobian.T @ lam)
