@@ -170,7 +170,7 @@ def sweep_on_every_core() -> dict:
     `--devices 1`, each twice in new processes: first with empty caches, then with the
     caches the first filled. Wall and CPU time of each process, and the chunk's own wall
     time from its manifest (the sharded vmapped program alone)."""
-    from jaxdeploy.commands.sweep import usable_cores
+    from jaxdeploy.commands._devices import usable_cores
 
     out = {"command": "jaxdeploy " + " ".join(SWEEP), "cores": usable_cores()}
     with tempfile.TemporaryDirectory() as tmp:
