@@ -19,6 +19,20 @@ def is_concrete(value) -> bool:
     return not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
 
 
+def float_data(value):
+    """`value` as float64 data of a compiled program: a NumPy array when it is concrete (a
+    Python or NumPy number, or an array already on the host), else `jnp.asarray(value,
+    float)`. The program sees the same abstract value either way (float64, not weak), so it
+    is the same program; a NumPy array is transferred with the call's other arguments,
+    while `jnp.asarray` of a Python float is an operation dispatched on its own (~30 µs on
+    the project's 2-core machine: 8 of them were a fifth of a warm 2 µs `simulate` call)."""
+    if isinstance(value, (int, float, np.number, np.ndarray)):
+        return np.asarray(value, dtype=np.float64)
+    import jax.numpy as jnp
+
+    return jnp.asarray(value, dtype=float)
+
+
 def _as_numpy(value) -> np.ndarray:
     return np.asarray(value, dtype=float)
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from . import _program_cache
 from ._collector import deferring_full_collections
-from ._validation import is_concrete
+from ._validation import float_data, is_concrete
 from .mechanism import ConsistentState, Mechanism
 from .solvers import (
     EpisodeLog,
@@ -311,7 +311,7 @@ def _save_times(t0, t_end, n_save, ts):
     if is_concrete((t0, t_end)) and not float(t_end) > float(t0):
         raise ValueError(f"t_end = {t_end!r} is invalid: it must be > t0 = {t0!r} (s)")
     if ts is not None:
-        ts = jnp.asarray(ts, dtype=float)
+        ts = float_data(ts)
         if is_concrete((ts, t0, t_end)):
             values = np.asarray(ts)
             if values.ndim != 1 or values.size == 0:
@@ -685,7 +685,7 @@ def prepare(
     solver = control.make_solver()
     dt_min, locate_events = control.dt_min, control.locate_events
     # The step is data, not part of the compiled program: changing it does not recompile.
-    dt0 = jnp.asarray(control.first_step(), dtype=float)
+    dt0 = float_data(control.first_step())
     if not control.adaptive and isinstance(solver, GeneralizedAlpha):
         solver = replace(solver, estimate_error=False)
     adjoint = dfx.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
@@ -700,7 +700,7 @@ def prepare(
     y0 = MechanismState(initial.q, initial.v, initial.qdd, initial.lam, initial.memory)
     ts = _save_times(t0, t_end, n_save, ts)
     # Times are data too: a new t_end or t0 does not recompile.
-    t0, t_end = jnp.asarray(t0, dtype=float), jnp.asarray(t_end, dtype=float)
+    t0, t_end = float_data(t0), float_data(t_end)
     # Both paths control the positions and velocities (the integrated variables) alone.
     controller = control.controller(state_norm)
     if step_ts is not None:
@@ -708,7 +708,7 @@ def prepare(
             raise ValueError("step_ts needs adaptive steps (give rtol/atol)")
         controller = dfx.ClipStepSizeController(controller, step_ts=jnp.asarray(step_ts, float))
     if locate_events and control.adaptive and mechanism.locates_events(y0.memory):
-        dt_min_data = None if dt_min is None else jnp.asarray(dt_min, dtype=float)
+        dt_min_data = None if dt_min is None else float_data(dt_min)
         controller = LocateEvents(controller, mechanism, dt_min=dt_min_data)
     step_times = None
     if replay_steps is True:

@@ -20,10 +20,15 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import diffrax as dfx
-import jax.numpy as jnp
 import optimistix as optx
 
-from .._validation import check_nonnegative, check_positive, check_range, is_concrete
+from .._validation import (
+    check_nonnegative,
+    check_positive,
+    check_range,
+    float_data,
+    is_concrete,
+)
 from ..mechanism import RevoluteClearance
 from .generalized_alpha import GeneralizedAlpha
 from .registry import (
@@ -197,7 +202,7 @@ class StepControl:
             return dfx.ConstantStepSize()
 
         def data(x):
-            return None if x is None else jnp.asarray(x, dtype=float)
+            return None if x is None else float_data(x)
 
         # PI coefficients suited to stiff problems (diffrax's `PIDController` docstring).
         return dfx.PIDController(
