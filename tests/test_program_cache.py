@@ -102,6 +102,20 @@ def test_code_options_and_shapes_each_miss(store, monkeypatch):
     assert len(_entries(store)) == 4
 
 
+class _Composed(eqx.Module):
+    x: jax.Array
+    power: int = eqx.field(static=True)
+
+
+def test_static_fields_key_the_structure_each_time(store):
+    """The structure's string is kept per structure (`_structure`), so a second call with
+    another static field must still get its own key, and NumPy data the key of jax data."""
+    x = jnp.linspace(0.1, 2.0, 7)
+    keys = [_program_cache.key(_toy, (_Composed(x, p),)) for p in (2, 3, 2, 3)]
+    assert keys[0] == keys[2] and keys[1] == keys[3] and keys[0] != keys[1]
+    assert keys[0] == _program_cache.key(_toy, (_Composed(np.asarray(x), 2),))
+
+
 def test_scene_options_change_the_key(store):
     """A scene option changes the mechanism's composition, hence the key."""
     from jaxdeploy.scenes import get_scene
