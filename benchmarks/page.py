@@ -636,7 +636,9 @@ def whole_process_section(w: dict) -> list[str]:
             "loosest of LSODA's whose slider error over the first 4 ms (against "
             "`tests/data/slider_crank_reference.npz`) is at or below ours: "
             f"{sc['ours']['error_4ms_m']:.2e} m ours, {script['first']['error_4ms_m']:.2e} m "
-            "the script's. Each side twice in new processes, the first with a new, empty "
+            "the script's. Each side twice in new processes (jaxdeploy's and the "
+            "benchmarks' modules compiled to bytecode beforehand, as an install leaves "
+            "them), the first with a new, empty "
             "`JAXDEPLOY_CACHE_DIR`, the second with the caches the first filled"
             + (
                 "; the two runs' trajectories are bit-identical."
