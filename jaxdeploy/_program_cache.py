@@ -297,14 +297,6 @@ def _aval(x):
     return aval.shape, aval.dtype, aval.weak_type
 
 
-# `str(treedef)` of the calls' argument structures, by structure: a mechanism's string (its
-# static fields printed) is most of the cost of `key` (0.7 ms of a 1.7 ms warm `simulate`
-# call). Structures are equal when their node types and static fields compare equal, the
-# rule by which `jax.jit` and `equinox.filter_jit` reuse a compiled program: keying the store
-# by it reuses no more than they do.
-_structures: dict = {}
-
-
 def _function_name(fn) -> str:
     """`module:qualname` of `fn`, or its repr (an `equinox.filter_jit` wrapper's is printed
     by wadler_lindig: 0.3 ms a call), kept per function object."""
@@ -324,14 +316,25 @@ def _dtype_name(dtype) -> str:
 
 _names: dict = {}
 _dtype_names: dict = {}
+# `str(treedef)` of the calls' argument structures, by structure: a mechanism's string (its
+# static fields printed) was most of the cost of `key` (0.7 ms of a 1.7 ms warm `simulate`
+# call). Structures are equal when their node types and static fields compare equal, the
+# rule by which `jax.jit` and `equinox.filter_jit` reuse a compiled program: keying the store
+# by it reuses no more than they do. At most `_STRUCTURES_KEPT` are kept (a sweep over a
+# static option makes a new one per value; a mechanism's string is tens of kB).
+_structures: dict = {}
+_STRUCTURES_KEPT = 256
 
 
 def _structure(treedef) -> str:
+    """`str(treedef)`, kept per structure (`_structures`)."""
     try:
         known = _structures.get(treedef)
     except TypeError:  # a static field that cannot be hashed
         return str(treedef)
     if known is None:
+        if len(_structures) >= _STRUCTURES_KEPT:
+            _structures.clear()
         known = _structures[treedef] = str(treedef)
     return known
 

@@ -25,7 +25,7 @@ def float_data(value):
     float)`. The program sees the same abstract value either way (float64, not weak), so it
     is the same program; a NumPy array is transferred with the call's other arguments,
     while `jnp.asarray` of a Python float is an operation dispatched on its own (~30 µs on
-    the project's 2-core machine: 8 of them were a fifth of a warm 2 µs `simulate` call)."""
+    the project's 2-core machine: `simulate` made 8 a call, a sixth of a warm 2 µs run)."""
     if isinstance(value, (int, float, np.number, np.ndarray)):
         return np.asarray(value, dtype=np.float64)
     import jax.numpy as jnp

@@ -116,6 +116,14 @@ def test_static_fields_key_the_structure_each_time(store):
     assert keys[0] == _program_cache.key(_toy, (_Composed(np.asarray(x), 2),))
 
 
+def test_the_kept_structures_are_bounded(store, monkeypatch):
+    x = jnp.linspace(0.1, 2.0, 7)
+    monkeypatch.setattr(_program_cache, "_STRUCTURES_KEPT", 2)
+    first = [_program_cache.key(_toy, (_Composed(x, p),)) for p in range(5)]
+    assert len(_program_cache._structures) <= 2
+    assert first == [_program_cache.key(_toy, (_Composed(x, p),)) for p in range(5)]
+
+
 def test_scene_options_change_the_key(store):
     """A scene option changes the mechanism's composition, hence the key."""
     from jaxdeploy.scenes import get_scene
