@@ -27,7 +27,7 @@ def float_data(value):
     while `jnp.asarray` of a Python float is an operation dispatched on its own (~30 µs on
     the project's 2-core machine: `simulate` made 8 a call, a sixth of a warm 2 µs run)."""
     if isinstance(value, (int, float, np.number, np.ndarray)):
-        return np.asarray(value, dtype=np.float64)
+        return _as_numpy(value)
     import jax.numpy as jnp
 
     return jnp.asarray(value, dtype=float)
