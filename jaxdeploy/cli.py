@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import atexit
 import os
 import signal
 import sys
+import threading
 
 from . import _program_cache
 from ._compilation_cache import enable_compilation_cache, prefer_cacheable_errors
@@ -16,6 +18,16 @@ from .commands import EXIT_INTERRUPTED, discover  # noqa: E402
 
 
 def main(argv=None) -> int:
+    """Run the command of `argv` (default: the process's own command line) and return its
+    exit code. Called without `argv`, as the `jaxdeploy` program is, it ends the process
+    itself once the command has returned (`_leave`)."""
+    code = _command(argv)
+    if argv is None:
+        _leave(code)
+    return code
+
+
+def _command(argv) -> int:
     parser = argparse.ArgumentParser(prog="jaxdeploy", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     runners = {}
@@ -45,6 +57,26 @@ def main(argv=None) -> int:
         return EXIT_INTERRUPTED
     finally:
         _program_cache.enable(programs)
+
+
+def _leave(code) -> None:
+    """End the process with exit `code` once its command has returned: what an orderly exit
+    does first is done here too (the threads' own exit hooks and a join of every non-daemon
+    thread, as `threading._shutdown` does at exit; then the `atexit` handlers: the read-ahead
+    hint, logging's flush; then the standard streams), but not the interpreter's teardown of
+    every module and of XLA's client, which took 0.15–0.3 s of each command's wall time on
+    the 2-core machine (`python -c "import jax; jax.numpy.zeros(3)"`: 0.45 s to its last line,
+    0.63 s as a whole process; the command's files are closed long before). Where this
+    Python has no `threading._shutdown` (a private function), or `code` is not a number, the
+    interpreter exits as usual."""
+    shutdown = getattr(threading, "_shutdown", None)
+    if shutdown is None or not isinstance(code, int):
+        return
+    shutdown()
+    atexit._run_exitfuncs()
+    _flush_if_free(sys.stdout)
+    _flush_if_free(sys.stderr)
+    os._exit(code)
 
 
 def _interrupt_line(command: str) -> str:

@@ -130,3 +130,41 @@ def test_save_times_are_checked_before_the_solve():
         simulate(mech, init, 0.1, dt=1e-3, ts=[0.0, 0.2])
     with pytest.raises(ValueError, match="t_end"):
         simulate(mech, init, 0.0, dt=1e-3)
+
+
+_LEAVING = """
+import atexit, sys, threading, time
+from jaxdeploy import cli
+
+out = sys.argv[1]
+atexit.register(lambda: open(out + "-atexit", "w").write("ran"))
+
+def late():
+    time.sleep(0.5)
+    open(out + "-thread", "w").write("ran")
+
+threading.Thread(target=late).start()  # not a daemon: an orderly exit waits for it
+sys.argv = ["jaxdeploy", *sys.argv[2:]]
+code = cli.main()
+open(out + "-after", "w").write("ran")  # never: main ends the process itself
+"""
+
+
+@pytest.mark.parametrize(("argv", "expected"), [(["scenes"], 0), (["simulate", "nope"], 2)])
+def test_the_program_leaves_as_an_orderly_exit_would(tmp_path, argv, expected):
+    """`main()` without arguments (the `jaxdeploy` program) ends the process with the
+    command's exit code, after non-daemon threads and `atexit` handlers, without the
+    interpreter's teardown; `main(argv)` returns (every other test here)."""
+    import subprocess
+    import sys
+
+    stem = str(tmp_path / "mark")
+    done = subprocess.run(
+        [sys.executable, "-c", _LEAVING, stem, *argv], capture_output=True, text=True
+    )
+    assert done.returncode == expected, done.stderr
+    assert (tmp_path / "mark-thread").read_text() == "ran"
+    assert (tmp_path / "mark-atexit").read_text() == "ran"
+    assert not (tmp_path / "mark-after").exists()
+    if expected == 0:
+        assert "slider_crank" in done.stdout  # flushed before the process ended

@@ -278,4 +278,11 @@ if __name__ == "__main__":
     # The command ends this process's group (its session: commands/_figures.py) on Ctrl-C,
     # a refusal or an error, and removes what was unfinished; a SIGINT sent here just ends it.
     signal.signal(signal.SIGINT, signal.SIG_DFL)
-    sys.exit(serve())
+    code = serve()
+    # The command waits for this process to end, not only for its files: leaving without
+    # the interpreter's teardown (matplotlib's modules and figures) takes 0.1-0.2 s off the
+    # command's wall time (a process that imports pyplot and saves one figure: 0.73-0.78 s
+    # as a whole against 0.88-0.95 s). The files are written and closed; the streams are flushed.
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
