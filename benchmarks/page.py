@@ -620,6 +620,31 @@ def whole_process_targets(w: dict) -> list[str]:
     return lines
 
 
+def start_up_lines(imports: dict | None) -> list[str]:
+    """What the second run's start-up spends on imports, by package (`whole_process.
+    start_up_imports`), the solvers' stack named apart."""
+    if not imports:
+        return []
+    from .whole_process import SOLVER_STACK
+
+    packages = imports["packages"]
+    stack = sum(packages.get(name, 0.0) for name in SOLVER_STACK)
+    named = ("jax", "jaxlib", "numpy", "equinox", "jaxdeploy")
+    other = imports["total_s"] - stack - sum(packages.get(name, 0.0) for name in named)
+    parts = ", ".join(f"{name} {packages.get(name, 0.0):.2f}" for name in named)
+    return [
+        f"The start-up's imports alone (`{imports['statement']}` in a new process, "
+        "`python -X importtime`, its own bookkeeping included; the fastest of three): "
+        f"{imports['total_s']:.2f} s, of which {parts}, the solvers' stack "
+        f"({', '.join(SOLVER_STACK)}) {stack:.2f} and the rest {other:.2f} s. A run read back "
+        "from the program cache calls a kept executable whose inputs and outputs are flat "
+        "arrays, but its arguments are still built, and its key computed, from objects "
+        "whose classes subclass diffrax's, so the solvers' stack is imported on the warm "
+        "path too.",
+        "",
+    ]
+
+
 def whole_process_section(w: dict) -> list[str]:
     """Where the whole-process rows come from, each run's wall and CPU time."""
     lines = ["## Whole processes", ""]
@@ -675,6 +700,7 @@ def whole_process_section(w: dict) -> list[str]:
             + " (first / second run).",
             "",
         ]
+        lines += start_up_lines(w.get("start_up_imports"))
     py = w.get("python_script")
     if py:
         lines += [

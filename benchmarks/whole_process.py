@@ -198,9 +198,51 @@ def sweep_on_every_core() -> dict:
     return out
 
 
+# What `jaxdeploy simulate` imports before its first phase: the command line, the scenes (and
+# with them the mechanism and the solvers), the simulation and the command's own module.
+START_UP_IMPORTS = (
+    "import jaxdeploy.cli, jaxdeploy.scenes, jaxdeploy.simulation, jaxdeploy.commands.simulate"
+)
+# The solvers' library and what it imports of its authors' others.
+SOLVER_STACK = ("diffrax", "optimistix", "lineax")
+
+
+def import_times(stderr: str) -> dict[str, float]:
+    """Each top-level package's own import time [s] from `python -X importtime`'s report
+    (the self time of each of its modules, summed; lines `import time: SELF | CUMULATIVE |
+    NAME` in µs)."""
+    totals: dict[str, float] = {}
+    for line in stderr.splitlines():
+        if not line.startswith("import time:"):
+            continue
+        own, _, name = line.removeprefix("import time:").split("|")
+        if not own.strip().isdigit():  # the header line
+            continue
+        package = name.strip().split(".")[0]
+        totals[package] = totals.get(package, 0.0) + int(own) * 1e-6
+    return totals
+
+
+def start_up_imports(runs: int = 3) -> dict:
+    """The start-up's imports (`START_UP_IMPORTS`) alone, in new processes with bytecode
+    present and nothing else running in them: the fastest of `runs` by total import time,
+    with each top-level package's share (`import_times`)."""
+    best = None
+    for _ in range(runs):
+        done = subprocess.run([sys.executable, "-X", "importtime", "-c", START_UP_IMPORTS],
+                              env=_environment(None), capture_output=True, text=True)  # fmt: skip
+        if done.returncode != 0:
+            raise RuntimeError(f"{START_UP_IMPORTS} failed: {done.stderr[-2000:]}")
+        packages = import_times(done.stderr)
+        if best is None or sum(packages.values()) < sum(best.values()):
+            best = packages
+    return {"statement": START_UP_IMPORTS, "total_s": sum(best.values()), "packages": best}
+
+
 def measure(root: str = ".") -> dict:
     return {
         "slider_crank": slider_crank_vs_script(root),
+        "start_up_imports": start_up_imports(),
         "python_script": python_script_second_process(),
         "sweep": sweep_on_every_core(),
     }

@@ -530,6 +530,49 @@ def test_whole_process_rows_render_first_and_second_runs():
     assert "| second | 3.00 | 4.00 | 1.00 | 1.00 | 3.0× |" in section
     assert "start_up 1.00 / 1.50; build 0.50 / –; compile 6.00 / –" in section
     assert "| second | 0.50 | 0.80 | 0.90 | 2.50 | 2.60 |" in section
+    assert "start-up's imports" not in section  # none measured: no sentence
+
+
+def test_start_up_imports_are_summed_by_package_and_rendered():
+    """`python -X importtime`'s report summed by top-level package (self times, µs → s; the
+    header skipped), and the page's sentence naming the solvers' stack apart."""
+    from benchmarks import page
+    from benchmarks.whole_process import import_times
+
+    report = "\n".join([
+        "import time: self [us] | cumulative | imported package",
+        "import time:    300000 |     400000 | jax",
+        "import time:    100000 |     100000 |   jax._src.core",
+        "import time:    150000 |     200000 | diffrax",
+        "import time:     50000 |      50000 |   optimistix",
+        "some other line",
+    ])  # fmt: skip
+    times = import_times(report)
+    assert times == pytest.approx({"jax": 0.4, "diffrax": 0.15, "optimistix": 0.05})
+    w = {
+        "slider_crank": dict(
+            command="jaxdeploy simulate slider_crank",
+            identical_runs=True,
+            ours=dict(
+                first=dict(wall_s=2.0, cpu_s=2.0, phases={"start_up_s": 1.0}),
+                second=dict(wall_s=1.0, cpu_s=1.0, phases={"start_up_s": 0.9}),
+                error_4ms_m=1e-9,
+            ),
+            script=dict(
+                rtol=1e-9,
+                atol=1e-12,
+                first=dict(wall_s=0.5, cpu_s=0.5, error_4ms_m=1e-10),
+                second=dict(wall_s=0.5, cpu_s=0.5, error_4ms_m=1e-10),
+            ),
+            first_ratio=4.0,
+            second_ratio=2.0,
+        ),
+        "start_up_imports": {"statement": "import x", "total_s": 0.7, "packages": times},
+    }
+    section = " ".join(page.whole_process_section(w))
+    assert "(`import x` in a new process" in section
+    assert "0.70 s, of which jax 0.40, jaxlib 0.00, numpy 0.00" in section
+    assert "the solvers' stack (diffrax, optimistix, lineax) 0.20 and the rest 0.10 s" in section
 
 
 def test_sweep_rows_render_both_device_counts():
