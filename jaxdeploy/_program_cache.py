@@ -101,9 +101,11 @@ def folder() -> str | None:
 def when_traced(callback):
     """Within this block, `callback()` is called once, in this thread, when the first call
     through the store has its program (traced and exported, or read back) and is about to
-    compile and run it: from then on the thread mostly waits on XLA, which does not hold
-    Python's GIL, so a caller may start tracing something else in another thread. Not called
-    when no call goes through the store (off, or uncacheable); None: nothing."""
+    compile and run it; inside `ahead_of_time()`, once the program is lowered for XLA's
+    compile (or its executable read back). From then on the thread mostly waits on XLA,
+    which does not hold Python's GIL, so a caller may start tracing something else in
+    another thread. Not called when no call goes through the store (off, or uncacheable);
+    None: nothing."""
     with _thread_setting("callback", callback):
         yield
 
@@ -360,6 +362,7 @@ def _call(fn, *args):
     if ahead:
         with _key_lock(cache_key):
             _executable(cache_key, path, entry[0], arrays)
+        _traced()  # if the executable was read back (no compile: `_lowered` did not call it)
         raise ProgramReady(True)
     _traced()
     exported, skeleton = entry
@@ -418,7 +421,7 @@ def _executable(cache_key, path, exported, arrays):
         # A kept executable is read back onto every device of the process: a one-device
         # program then fails with "Expected args to execute_sharded_on_local_devices to have
         # 4 shards" (jax 0.10.2, 4 forced host devices: the sweep's probe). Compiled, not kept.
-        compiled = jax.jit(exported.call).lower(*arrays).compile()
+        compiled = _lowered(exported.call, arrays).compile()
         _compiled[cache_key] = compiled
         return compiled
     where = _executable_path(path)
@@ -439,6 +442,16 @@ def _executable(cache_key, path, exported, arrays):
     return compiled
 
 
+def _lowered(fn, arrays):
+    """`jax.jit(fn)` lowered for `arrays`; then `when_traced`'s callback, if any: what
+    follows is XLA's compile, which leaves Python's GIL free for another thread's trace."""
+    import jax
+
+    lowered = jax.jit(fn).lower(*arrays)
+    _traced()
+    return lowered
+
+
 def _compile_and_keep(exported, arrays, where):
     """Compile `exported` for `arrays` and keep the executable at `where`, unless XLA's
     code came from JAX's persistent compilation cache: such an executable serializes without
@@ -448,7 +461,7 @@ def _compile_and_keep(exported, arrays, where):
 
     _watch_cache_hits()
     hits = getattr(_hits, "count", 0)
-    compiled = jax.jit(exported.call).lower(*arrays).compile()
+    compiled = _lowered(exported.call, arrays).compile()
     if getattr(_hits, "count", 0) == hits:
         _store_executable(where, compiled)
         return compiled

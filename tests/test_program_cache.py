@@ -310,6 +310,74 @@ def test_when_traced_calls_back_once_after_the_trace_and_before_the_compile(stor
     assert seen == [1]
 
 
+def test_when_traced_calls_back_ahead_of_time_before_the_compile_and_for_a_read_back(store):
+    """Inside `ahead_of_time` the callback comes once the program is lowered for XLA and
+    before XLA's compile (the command's assembly traces then, while XLA compiles without the
+    GIL: commands/_ahead.py); for an executable read back, which compiles nothing, once it is
+    loaded."""
+    shape = jax.ShapeDtypeStruct((7,), jnp.float64)
+    compiled_before = []
+
+    def make():
+        with (
+            _program_cache.ahead_of_time(),
+            _program_cache.when_traced(lambda: compiled_before.append(len(_compiles))),
+            pytest.raises(_program_cache.ProgramReady),
+        ):
+            _program_cache.call(_toy, shape, 0.75, 2)
+
+    count = len(_compiles)
+    make()
+    assert compiled_before == [count] and len(_compiles) > count  # then it compiled
+    _program_cache._loaded.clear()  # as in a new process: the kept executable is read back
+    _program_cache._compiled.clear()
+    count = len(_compiles)
+    make()
+    assert compiled_before[1:] == [count] and len(_compiles) == count
+
+
+def test_compile_ahead_lets_the_assembly_go_on_once_the_run_is_traced(store, monkeypatch):
+    """`CompileAhead.wait_traced` returns while the run's program is still in XLA's compile
+    (the compile here waits until the caller has gone on: it would wait for ever, up to the
+    timeout, were `wait_traced` to wait for the compile), and the thread finishes it."""
+    import threading
+
+    import jaxdeploy.simulation
+    import jaxdeploy.solvers
+    from jaxdeploy.commands import _ahead
+
+    went_on = threading.Event()
+    lowered = _program_cache._lowered
+
+    def lowered_then_held(fn, arrays):
+        program = lowered(fn, arrays)
+
+        class Held:
+            def compile(self):
+                assert went_on.wait(30), "the caller did not go on before the compile"
+                return program.compile()
+
+        return Held()
+
+    def run(mechanism, initial, t_end, **_):
+        return _program_cache.call(_toy, initial, t_end, 3)
+
+    shape = jax.ShapeDtypeStruct((5,), jnp.float64)
+    monkeypatch.setattr(_program_cache, "_lowered", lowered_then_held)
+    monkeypatch.setattr(_ahead, "abstract_state", lambda mechanism: shape)
+    monkeypatch.setattr(jaxdeploy.solvers, "solver_advice", lambda *a: None)
+    monkeypatch.setattr(jaxdeploy.simulation, "simulate", run)
+    ahead = _ahead.CompileAhead(1.25, 11, control=None)
+    assert ahead.wait_traced() == 0.0  # nothing started: nothing to wait for
+    compiles = len(_compiles)
+    ahead.start(mechanism=None)
+    ahead.wait_traced()
+    assert len(_compiles) == compiles  # gone on before the compile
+    went_on.set()
+    ahead.wait()
+    assert len(_compiles) > compiles and len(_entries(store)) == 1
+
+
 def test_a_command_called_from_python_leaves_the_program_cache_as_it_found_it(
     tmp_path, monkeypatch
 ):

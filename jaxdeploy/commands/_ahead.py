@@ -7,7 +7,11 @@ calls `simulate` with that abstract state inside `_program_cache.ahead_of_time()
 program is traced, stored and compiled while the main thread traces, compiles and runs the
 assembly, and the run's own call then finds it ready (or waits for it: one lock per
 program). XLA's compile and the waits for it leave Python's GIL free, so on two cores the
-two compiles overlap; the traces still take turns.
+two compiles overlap. The traces would take turns (Python's GIL): traced beside the
+assembly's, the run's trace and lowering took twice as long, and the run's compile, the
+longest of the command's programs, began that much later. So the main thread waits for the
+run's program to be traced (`wait_traced`) before it traces the assembly, which then fits
+in the time XLA compiles the run's program (measured in `CompileAhead.wait_traced`).
 
 Nothing is made ahead when the program cache is off (a plain `jit` call could not find the
 program again), or when the step control would warn (`solver_advice`): the warning is the
@@ -50,6 +54,7 @@ class CompileAhead:
     def __init__(self, t_end: float, n_save: int, control):
         self.t_end, self.n_save, self.control = t_end, n_save, control
         self._thread: threading.Thread | None = None
+        self._traced = threading.Event()
         self.seconds = 0.0
 
     def start(self, mechanism) -> None:
@@ -72,7 +77,7 @@ class CompileAhead:
         began = time.time()
         try:
             initial = abstract_state(mechanism)
-            with _program_cache.ahead_of_time():
+            with _program_cache.ahead_of_time(), _program_cache.when_traced(self._traced.set):
                 simulate(mechanism, initial, self.t_end, n_save=self.n_save, control=self.control)
         except _program_cache.ProgramReady:
             pass  # made, or not cacheable: the run's call finds out
@@ -80,10 +85,31 @@ class CompileAhead:
             pass
         finally:
             self.seconds = time.time() - began
+            self._traced.set()  # a caller of `wait_traced` never waits for more than this
 
     @property
     def started(self) -> bool:
         return self._thread is not None
+
+    def wait_traced(self) -> float:
+        """Wait until the run's program is traced and lowered (read back, or stored) and
+        XLA compiles it, or until the thread ended (an error, an uncacheable call); at once
+        when nothing was started. **Returns:** the wall time [s] this call waited.
+
+        Why: two threads that trace take turns on Python's GIL. slider_crank's first run
+        (`--rtol 1e-8 --atol 1e-11`, 2 cores, empty caches): traced beside the assembly, the
+        run's trace took 2.8 s instead of 1.4–1.6 s, the assembly's trace and lowering 1.5
+        and 1.7 s instead of 0.7 and 0.1 s, and XLA's compile of the run began 5.7 s after
+        the start. Traced first, the run's program is in XLA's compile 4.0 s after the start
+        (3.9–4.5 s, without the GIL) while the assembly traces, lowers and compiles. The
+        whole process, 6 alternated pairs: 10.6 → 9.9 s (median; wall ratio 0.86).
+        deploy_array's first run did not move (35.4 → 36.5 s, 3 pairs, ratio 0.96): its
+        run's XLA compile (14.7 s) is longer than everything else the process does."""
+        if self._thread is None:
+            return 0.0
+        began = time.time()
+        self._traced.wait()
+        return time.time() - began
 
     def wait(self) -> float:
         """Join the thread (a process must not end while it compiles: XLA aborts); the wall

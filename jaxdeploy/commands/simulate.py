@@ -397,6 +397,8 @@ def _build(args, scene, params, control, phases, ahead):
         except ValueError as err:
             raise _Refused(str(err)) from None
         ahead.start(balance_metered(mechanism) or mechanism)  # the mechanism that runs
+        # The assembly traces once the run's program is in XLA's compile (`_ahead`).
+        ahead.wait_traced()
         return scene.initial_state(params, mechanism), facts
 
     mechanism, initial, facts, source = _scene_cache.built(
