@@ -599,15 +599,20 @@ def whole_process_targets(w: dict) -> list[str]:
             )
     sw = w.get("sweep")
     if sw:
-        for run, what in (("first", "empty caches"), ("second", "caches filled")):
-            one, default = sw["one device"][run], sw["default"][run]
-            lines.append(
-                f"| `jaxdeploy sweep` (16 deploy_array cases, 0.6 s), {what}: `--devices 1` / "
-                f"default ({default['devices']} devices), whole process | "
-                f"{sw[f'{run}_speedup']:.2f}× ({one['wall_s']:.1f} s / {default['wall_s']:.1f} s;"
-                f" the chunk alone {sw[f'{run}_chunk_speedup']:.2f}×: {one['chunk_wall_s']:.1f} s"
-                f" / {default['chunk_wall_s']:.1f} s) | (reference: every core by default) | – |"
-            )
+        default = sw["default"]
+        how = f"{default['first']['policy']}, {default['first']['devices']} device(s)"
+        for name, flags in (
+            ("vmap, every core", "--policy all"),
+            ("vmap, one device", "--policy all --devices 1"),
+        ):
+            for run, what in (("first", "empty caches"), ("second", "caches filled")):
+                other = sw[name][run]
+                lines.append(
+                    f"| `jaxdeploy sweep` (16 deploy_array cases, 0.6 s), {what}: `{flags}` / "
+                    f"default ({how}), whole process | {sw[f'{name}/{run}_ratio']:.2f}× "
+                    f"({other['wall_s']:.1f} s / {default[run]['wall_s']:.1f} s) | "
+                    "(reference: the default) | – |"
+                )
     py = w.get("python_script")
     if py:
         second = py["second"]
@@ -724,23 +729,26 @@ def whole_process_section(w: dict) -> list[str]:
     sw = w.get("sweep")
     if sw:
         lines += [
-            f"`{sw['command']}`: a sweep's chunk is sharded over one JAX CPU device per usable "
-            f"core by default ({sw['cores']} here; `--devices N` chooses), the shards running "
-            "side by side; against `--devices 1`, each twice in new processes (empty caches, "
-            "then the caches the first filled). The chunk's wall time is from the sweep's "
-            "manifest; the rest of the process is start-up, the run-length probe (which "
-            "traces the chunk's program: a sweep's programs are not in the program cache) and "
-            "the files.",
+            f"`{sw['command']}`: by default (`--policy auto`) a sweep of at most 64 cases runs "
+            "each case alone, as `jaxdeploy simulate` runs it, on one JAX device with a thread "
+            f"per usable core ({sw['cores']} here), its programs kept in the program cache; "
+            "`--policy all` runs its chunk as one vmap sharded over one device per core "
+            "(`--devices N` chooses the count). Each twice in new processes (empty caches, then "
+            "the caches the first filled). The chunk's wall time is from the sweep's manifest; "
+            "the rest of the process is start-up, the run-length probe (which makes the "
+            "chunk's programs: a sharded sweep's are not kept in the program cache, so its "
+            "second process traces them again) and the files.",
             "",
-            "| devices | run | whole process wall [s] | CPU [s] | the chunk [s] |",
-            "|---|---|---|---|---|",
+            "| configuration | policy | devices | run | whole process wall [s] | CPU [s] "
+            "| the chunk [s] |",
+            "|---|---|---|---|---|---|---|",
         ]
-        for name in ("one device", "default"):
+        for name in ("default", "vmap, every core", "vmap, one device"):
             for run in ("first", "second"):
                 r = sw[name][run]
                 lines.append(
-                    f"| {r['devices']} ({name}) | {run} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} "
-                    f"| {r['chunk_wall_s']:.1f} |"
+                    f"| {name} | {r['policy']} | {r['devices']} | {run} | {r['wall_s']:.1f} | "
+                    f"{r['cpu_s']:.1f} | {r['chunk_wall_s']:.1f} |"
                 )
         lines.append("")
     return lines

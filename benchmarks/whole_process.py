@@ -11,8 +11,9 @@ whole-process`): interpreter start, imports, build, compile or cache load, solve
 * A Python script (README's "Python" example: `jd.enable_caches(...)`, the slider-crank with
   clearance 1e-4 m, Tsit5 at rtol 1e-8) run twice in new processes with one cache folder: the
   wall and CPU time from the end of `import jaxdeploy` to its first `simulate` result.
-* `jaxdeploy sweep` of 16 deploy_array cases on its default devices (one per usable core)
-  against `--devices 1`, each with empty and then filled caches (`sweep_on_every_core`).
+* `jaxdeploy sweep` of 16 deploy_array cases as it runs by default (each case alone, a thread
+  per core) against its vmapped chunk sharded over one device per core and on one device,
+  each with empty and then filled caches (`sweep_on_every_core`).
 
 Wall time from the parent (`time.perf_counter` around the child), CPU time of the child's
 process tree (`RUSAGE_CHILDREN`, user + system, which other jobs' load does not inflate).
@@ -165,20 +166,31 @@ SWEEP = ("sweep", "--scene", "deploy_array", "--grid", "spring_stiffness=1.2:1.8
          "--t-end", "0.6", "--quiet", "--long-run")  # fmt: skip
 
 
+# The sweep's configurations: its default (16 cases: `auto` runs each case alone, one device,
+# a thread per core), and the vmapped chunk sharded over one device per core and on one device.
+SWEEP_CONFIGURATIONS = (
+    ("default", ()),
+    ("vmap, every core", ("--policy", "all")),
+    ("vmap, one device", ("--policy", "all", "--devices", "1")),
+)
+
+
 def sweep_on_every_core() -> dict:
-    """`jaxdeploy sweep` (`SWEEP`) with its default devices (one per usable core) against
-    `--devices 1`, each twice in new processes: first with empty caches, then with the
-    caches the first filled. Wall and CPU time of each process, and the chunk's own wall
-    time from its manifest (the sharded vmapped program alone)."""
+    """`jaxdeploy sweep` (`SWEEP`) as it runs by default against its vmapped chunk on one
+    device per usable core and on one device (`SWEEP_CONFIGURATIONS`), each twice in new
+    processes: first with empty caches, then with the caches the first filled. Wall and CPU
+    time of each process, its policy and devices, and the chunk's own wall time from its
+    manifest; the ratios of each vmapped configuration to the default."""
     from jaxdeploy.commands._devices import usable_cores
 
     out = {"command": "jaxdeploy " + " ".join(SWEEP), "cores": usable_cores()}
     with tempfile.TemporaryDirectory() as tmp:
-        for name, extra in (("one device", ("--devices", "1")), ("default", ())):
-            env = _environment(os.path.join(tmp, name.replace(" ", "_") + "_cache"))
+        for name, extra in SWEEP_CONFIGURATIONS:
+            slug = "".join(c if c.isalnum() else "_" for c in name)
+            env = _environment(os.path.join(tmp, slug + "_cache"))
             runs = {}
             for run in ("first", "second"):
-                folder = os.path.join(tmp, f"{name.replace(' ', '_')}_{run}")
+                folder = os.path.join(tmp, f"{slug}_{run}")
                 command = [sys.executable, "-m", "jaxdeploy.cli", *SWEEP, "--out", folder,
                            *extra]  # fmt: skip
                 done = _run(command, env)
@@ -188,13 +200,13 @@ def sweep_on_every_core() -> dict:
                     "wall_s": done["wall_s"],
                     "cpu_s": done["cpu_s"],
                     "devices": len(manifest["devices"]),
+                    "policy": manifest["definition"]["policy"]["kind"],
                     "chunk_wall_s": sum(c["wall_time_s"] for c in manifest["chunks"]),
                 }
             out[name] = runs
-    for run in ("first", "second"):
-        one, default = out["one device"][run], out["default"][run]
-        out[f"{run}_speedup"] = one["wall_s"] / default["wall_s"]
-        out[f"{run}_chunk_speedup"] = one["chunk_wall_s"] / default["chunk_wall_s"]
+    for name, _ in SWEEP_CONFIGURATIONS[1:]:
+        for run in ("first", "second"):
+            out[f"{name}/{run}_ratio"] = out[name][run]["wall_s"] / out["default"][run]["wall_s"]
     return out
 
 

@@ -7,8 +7,10 @@ each chunk is one compiled batch (`batch.batch_function`, compiled once for the 
 batch axis is sharded over all local devices (a `NamedSharding` over a 1-D mesh of
 `jax.devices()`; the chunk is padded to a multiple of the device count with copies of its last
 case, dropped on output), so memory is bounded by one chunk, whatever the number of cases.
-Each device batches its shard by the sweep's `policy` (default: one vmap of its shard; see
-`parse_policy`).
+Each device batches its shard by the sweep's `policy` (one vmap of its shard, or vmapped
+groups), or, with the policy `each`, each case runs alone, as `simulate` runs it, two at a
+time on a machine of two cores (`parse_policy`; `auto`, the default, takes `each` for a sweep
+of at most `AUTO_EACH_MAX_CASES` cases).
 
 Each finished chunk is written atomically as `chunk_NNNNN.npz` (case indices, parameters,
 status, step counts, optional per-case features, summaries and trajectories), then recorded in
@@ -57,17 +59,30 @@ from .simulation import result_code
 from .solvers.step_control import StepControl
 
 MANIFEST = "manifest.json"
-# How each chunk is batched (`parse_policy`): one vmap of each device's shard. (Lanes refilled
-# from the pending cases, the default before, cost more per simulation than a plain vmap on
-# slider_crank and were removed.)
-DEFAULT_POLICY = "all"
+# How each chunk is batched (`parse_policy`): `auto`, which takes `each` (every case alone)
+# for a sweep of at most `AUTO_EACH_MAX_CASES` cases and `all` (one vmap of each device's
+# shard) for a larger one. (Lanes refilled from the pending cases, the default before, cost
+# more per simulation than a plain vmap on slider_crank and were removed.)
+DEFAULT_POLICY = "auto"
 DEFAULT_CHUNK_SIZE = 64
+# Why `each` up to this many cases: a vmapped program is another compile than the single run
+# of `jaxdeploy simulate` and `jaxdeploy.simulate` (slider_crank: 13.5 s against 8.4 s,
+# docs/performance.md), and a sharded one is never kept in the program cache, so every sweep
+# process traces it again; the vmap then saves at most ~22 % per case (slider_crank's
+# 256-case batch: 1.28x one at a time, per simulation). Cases run alone reuse the single
+# run's kept programs (a sweep after a `simulate` of the scene, or a second sweep of the same
+# shapes, compiles nothing) and run two at a time on two cores. The tour's three-case sweep
+# of slider_crank, measured in one process after two `jaxdeploy simulate` runs had filled the
+# caches: 20.0 s vmapped and sharded, 9.6 s each alone (9.2 s compiling the single run's
+# program for the sweep's 201 saved times), 3.5 s in a second process.
+AUTO_EACH_MAX_CASES = 64
 
 
 def parse_policy(text: str) -> dict:
-    """A batch policy, as the manifest records it: `"all"` (one vmap of the chunk) or
-    `"groups:G"` (vmapped groups of G one after another). Anything else is refused, naming the
-    valid forms."""
+    """A batch policy, as the manifest records it: `"all"` (one vmap of the chunk),
+    `"groups:G"` (vmapped groups of G one after another), `"each"` (every case alone, as
+    `simulate` runs it: `_each_function`) or `"auto"` (`resolve_policy`: resolved before it
+    is recorded). Anything else is refused, naming the valid forms."""
     parts = str(text).strip().split(":")
     try:
         numbers = [int(p) for p in parts[1:]]
@@ -75,13 +90,31 @@ def parse_policy(text: str) -> dict:
         numbers = None
     kind = parts[0]
     valid = numbers is not None and all(n >= 1 for n in numbers)
-    if kind == "all" and valid and not numbers:
-        return {"kind": "all"}
+    if kind in ("all", "each", "auto") and valid and not numbers:
+        return {"kind": kind}
     if kind == "groups" and valid and len(numbers) == 1:
         return {"kind": "groups", "group_size": numbers[0]}
     raise ValueError(
-        f"policy = {text!r} is invalid; valid: 'all' or 'groups:G' with an integer G ≥ 1"
+        f"policy = {text!r} is invalid; valid: 'auto', 'each', 'all' or 'groups:G' with an "
+        "integer G ≥ 1"
     )
+
+
+def resolve_policy(policy: dict, n_cases: int, process_count: int = 1) -> dict:
+    """The policy a sweep of `n_cases` runs by: `auto` is `each` up to `AUTO_EACH_MAX_CASES`
+    cases (the reason is beside it), else `all`; and `all` in a sweep of several processes
+    (`jax.distributed`), whose chunks are one program over every host's devices. `each` is
+    refused there: every process would run every case."""
+    if policy["kind"] == "each" and process_count > 1:
+        raise ValueError(
+            "policy = 'each' runs every case in every process of a distributed sweep; use "
+            "'all' or 'groups:G'"
+        )
+    if policy["kind"] != "auto":
+        return policy
+    if process_count == 1 and n_cases <= AUTO_EACH_MAX_CASES:
+        return {"kind": "each"}
+    return {"kind": "all"}
 
 
 def _policy_options(policy: dict) -> dict:
@@ -89,6 +122,90 @@ def _policy_options(policy: dict) -> dict:
     if policy["kind"] == "groups":
         return {"group_size": policy["group_size"]}
     return {}
+
+
+def _each_function(
+    scene: Scene,
+    varied: tuple[str, ...],
+    shared: Mapping,
+    t_end: float,
+    ts,
+    *,
+    control: StepControl,
+    evaluate: Callable,
+    sharding=None,
+    energy_meter: bool = False,
+):
+    """The policy `each`'s counterpart of `batch.batch_function` (same call and results):
+    `run(values, t_end=t, ts=times)` runs every case of `values` (a `(B,)` array per varied
+    name) alone, as `batch.run_scene` runs it with the case's parameters as numbers (the
+    scene built for them, its initial state and its run through the program cache: the
+    programs `jaxdeploy simulate` and `jaxdeploy.simulate` run and keep), and returns
+    `(trajectories, features)` stacked along a leading case axis, as the vmap returns them;
+    `evaluate(params, trajectory)` is one compiled program for every case, the varied
+    parameters its data. The first case runs alone (it traces, compiles or reads the
+    programs); the others as many at a time as the process may use cores (XLA runs calls of
+    one device side by side, each on its calling thread). A case that repeats the one before
+    it (a chunk's padding) is not run again. `sharding` is not used: the cases are not
+    placed, and run on the default device."""
+    import concurrent.futures
+    import warnings
+
+    import equinox as eqx
+
+    from .batch import run_scene
+    from .mechanism import balance_metered, without_balance_meter
+
+    features = eqx.filter_jit(evaluate)
+    default_t_end, default_ts = float(t_end), np.asarray(ts, dtype=float)
+
+    def case(values, horizon, times):
+        named = dict(zip(varied, values, strict=True))
+        params = {**shared, **{k: float(v) for k, v in named.items()}}
+        trajectory = run_scene(
+            scene, params, horizon, ts=times, control=control, energy_meter=energy_meter
+        )
+        plain = trajectory
+        if energy_meter and balance_metered(scene.build(params)) is not None:
+            plain = without_balance_meter(trajectory)
+        # The varied parameters as data, so that one program serves every case.
+        data = {**shared, **{k: jnp.asarray(float(v)) for k, v in named.items()}}
+        return jax.tree.map(np.asarray, (trajectory, features(data, plain)))
+
+    def run(values, t_end=default_t_end, ts=default_ts):
+        rows = list(zip(*(np.asarray(v, dtype=float) for v in values), strict=True))
+        distinct = [i for i, row in enumerate(rows) if i == 0 or row != rows[i - 1]]
+        horizon, times = float(t_end), jnp.asarray(ts, dtype=float)
+        results = {distinct[0]: case(rows[distinct[0]], horizon, times)}
+        # Each thread's run enters `warnings.catch_warnings` (`run_scene`), which is not
+        # thread-safe: whatever they leave of the warning filters is undone here.
+        with (
+            warnings.catch_warnings(),
+            concurrent.futures.ThreadPoolExecutor(_usable_cores()) as pool,
+        ):
+            rest = {i: pool.submit(case, rows[i], horizon, times) for i in distinct[1:]}
+            try:
+                results.update({i: future.result() for i, future in rest.items()})
+            except BaseException:  # an error or Ctrl-C: the cases not begun are not run
+                pool.shutdown(cancel_futures=True)
+                raise
+        ran = [results[max(d for d in distinct if d <= i)] for i in range(len(rows))]
+        try:
+            return jax.tree.map(lambda *leaves: np.stack(leaves), *ran)
+        except ValueError as err:  # the cases' trajectories differ in structure
+            raise ValueError(
+                f"the cases of this sweep run mechanisms of different compositions ({err}), "
+                "which policy 'each' cannot stack; use policy 'all'"
+            ) from None
+
+    return run
+
+
+def _usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system has one)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
 
 
 def chunk_shape(chunk_size: int, n_cases: int, n_devices: int) -> int:
@@ -187,9 +304,13 @@ def sweep(
       scene's default); recorded in the manifest's definition.
     - `chunk_size`: cases per compiled run (bounds memory; rounded up to a multiple of the
       device count, and down to what the sweep needs: `chunk_shape`).
-    - `policy`: how a chunk's cases are batched on each device (`parse_policy`): `"all"`
-      (default `DEFAULT_POLICY`) or `"groups:G"`. Recorded in the definition: it can change a
-      case's round-off and hence its steps.
+    - `policy`: how a chunk's cases run (`parse_policy`): `"each"` (every case alone, as
+      `simulate` runs it, as many at a time as the process may use cores; its programs are
+      the single run's, kept in the program cache), `"all"` (one vmap of each device's shard)
+      or `"groups:G"`; `"auto"` (default `DEFAULT_POLICY`) takes `"each"` for at most
+      `AUTO_EACH_MAX_CASES` cases, else `"all"` (resumed: as the sweep was started).
+      Recorded in the definition, resolved: it can change a case's round-off and hence its
+      steps.
     - `resume`: continue a sweep in `out_dir` (its definition must match); without it a
       non-empty `out_dir` is refused.
     - `evaluate(params, trajectory) -> {name: scalar}`: per-case features computed inside the
@@ -219,11 +340,14 @@ def sweep(
     Stages: `_setup` (every argument and case checked, the definition) → `_open_manifest`
     (resume or new) → `_chunks_to_run` → per chunk `_run_chunk` → `_store_chunk`.
     """
+    if resume and parse_policy(policy)["kind"] == "auto":
+        policy = _recorded_policy(out_dir) or policy  # as the sweep was started
     setup = _setup(scene, grid, t_end, n_save, fixed, control, chunk_size, policy, features)
     setup.definition["summary"] = summarize is not None
     manifest = _open_manifest(out_dir, setup, resume, seed)
     todo = _chunks_to_run(out_dir, manifest, setup)
-    run = batch_function(
+    runner = _each_function if setup.policy["kind"] == "each" else batch_function
+    run = runner(
         scene,
         setup.varied,
         setup.shared,
@@ -282,14 +406,18 @@ def _setup(scene, grid, t_end, n_save, fixed, control, chunk_size, policy, featu
     control = step_control(scene, control)
     if not (isinstance(chunk_size, int) and chunk_size >= 1):
         raise ValueError(f"chunk_size = {chunk_size!r} is invalid: it must be an integer ≥ 1")
-    parsed_policy = parse_policy(policy)
     cases = grid_cases(grid)
     n_cases = len(next(iter(cases.values())))
+    parsed = policy if isinstance(policy, dict) else parse_policy(policy)  # dict: recorded
+    parsed_policy = resolve_policy(parsed, n_cases, jax.process_count())
     table, varied, shared = stack_cases(scene, cases, fixed)
     if not varied:  # one case (or copies): still trace the first grid name
         first = next(iter(grid))
         varied, shared = (first,), {k: v for k, v in shared.items() if k != first}
-    sharding, n_devices = _device_mesh()
+    if parsed_policy["kind"] == "each":  # cases alone, on the default device: not placed
+        sharding, n_devices = None, 1
+    else:
+        sharding, n_devices = _device_mesh()
     chunk_size = chunk_shape(chunk_size, n_cases, n_devices)
     definition = _definition(
         scene, grid, fixed, t_end, n_save, control, chunk_size, features, parsed_policy
@@ -307,6 +435,18 @@ def _setup(scene, grid, t_end, n_save, fixed, control, chunk_size, policy, featu
         chunk_size=chunk_size,
         definition=definition,
     )
+
+
+def _recorded_policy(out_dir: str) -> dict | None:
+    """The policy the sweep in `out_dir` was started with (`all` for one written before
+    policies were recorded), or None when there is none to read (the refusal, if any, is
+    `_open_manifest`'s)."""
+    try:
+        definition = _read_manifest(os.path.join(out_dir, MANIFEST))["definition"]
+        policy = definition.get("policy", {"kind": "all"})
+        return policy if policy.get("kind") in ("all", "each", "groups") else None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
 
 
 def _open_manifest(out_dir: str, setup: _Setup, resume: bool, seed) -> dict:
@@ -374,6 +514,8 @@ def _chunk_inputs(setup: _Setup, k: int):
     start, stop = _chunk_range(setup, k)
     index = np.arange(start, stop)
     padded = np.concatenate([index, np.full(setup.chunk_size - len(index), stop - 1)])
+    if setup.sharding is None:  # `each`: the values themselves
+        return tuple(setup.table[name][padded] for name in setup.varied)
     return tuple(_place(setup.table[name][padded], setup.sharding) for name in setup.varied)
 
 

@@ -575,32 +575,44 @@ def test_start_up_imports_are_summed_by_package_and_rendered():
     assert "the solvers' stack (diffrax, optimistix, lineax) 0.20 and the rest 0.10 s" in section
 
 
-def test_sweep_rows_render_both_device_counts():
-    """The sweep's rows (issue 32, batch on every core): the default devices against
-    `--devices 1`, whole process and the chunk alone, and the section's table."""
+def test_sweep_rows_render_the_default_against_the_vmapped_chunk():
+    """The sweep's rows (issue 32, batch on every core): the default (each case alone) against
+    the vmapped chunk on every core and on one device, whole processes, and the section's
+    table with each configuration's policy, devices and chunk time."""
     from benchmarks import page
 
-    def run(wall, chunk, devices):
-        return dict(wall_s=wall, cpu_s=wall + 1.0, chunk_wall_s=chunk, devices=devices)
+    def run(wall, chunk, devices, policy):
+        return dict(wall_s=wall, cpu_s=wall + 1.0, chunk_wall_s=chunk, devices=devices,
+                    policy=policy)  # fmt: skip
 
     w = {
         "sweep": {
             "command": "jaxdeploy sweep --scene deploy_array",
             "cores": 2,
-            "one device": {"first": run(50.0, 15.0, 1), "second": run(30.0, 14.0, 1)},
-            "default": {"first": run(40.0, 10.0, 2), "second": run(20.0, 7.0, 2)},
-            "first_speedup": 1.25,
-            "first_chunk_speedup": 1.5,
-            "second_speedup": 1.5,
-            "second_chunk_speedup": 2.0,
+            "default": {"first": run(30.0, 12.0, 1, "each"), "second": run(15.0, 11.0, 1, "each")},
+            "vmap, every core": {
+                "first": run(45.0, 10.0, 2, "all"),
+                "second": run(24.0, 7.0, 2, "all"),
+            },
+            "vmap, one device": {
+                "first": run(60.0, 15.0, 1, "all"),
+                "second": run(30.0, 14.0, 1, "all"),
+            },
+            "vmap, every core/first_ratio": 1.5,
+            "vmap, every core/second_ratio": 1.6,
+            "vmap, one device/first_ratio": 2.0,
+            "vmap, one device/second_ratio": 2.0,
         }
     }
     rows = "\n".join(page.whole_process_targets(w))
-    assert "caches filled: `--devices 1` / default (2 devices), whole process | 1.50× " in rows
-    assert "(30.0 s / 20.0 s; the chunk alone 2.00×: 14.0 s / 7.0 s)" in rows
+    assert (
+        "caches filled: `--policy all` / default (each, 1 device(s)), whole process | 1.60× "
+        "(24.0 s / 15.0 s)" in rows
+    )
+    assert "empty caches: `--policy all --devices 1` / default (each, 1 device(s))" in rows
     section = "\n".join(page.whole_process_section(w))
-    assert "| 2 (default) | second | 20.0 | 21.0 | 7.0 |" in section
-    assert "| 1 (one device) | first | 50.0 | 51.0 | 15.0 |" in section
+    assert "| default | each | 1 | second | 15.0 | 16.0 | 11.0 |" in section
+    assert "| vmap, one device | all | 1 | first | 60.0 | 61.0 | 15.0 |" in section
 
 
 def test_shared_steps_give_every_case_the_same_steps_and_a_run_within_tolerance():

@@ -37,6 +37,8 @@ def _command(out, *extra):
         "21",
         "--chunk-size",
         "4",
+        "--policy",
+        "all",  # the sharded vmap (24 cases would run one by one by default: `auto`)
         "--out",
         str(out),
         "--quiet",
@@ -163,8 +165,10 @@ def test_sweep_policy_is_parsed_recorded_and_checked_on_resume(tmp_path):
 
     assert parse_policy("all") == {"kind": "all"}
     assert parse_policy("groups:8") == {"kind": "groups", "group_size": 8}
-    for bad in ("lanes:8", "groups", "groups:0", "groups:2.5", "groups:2:3", "vmap", "all:2", ""):
-        with pytest.raises(ValueError, match="valid: 'all' or 'groups:G'"):
+    assert parse_policy("each") == {"kind": "each"} and parse_policy("auto") == {"kind": "auto"}
+    for bad in ("lanes:8", "groups", "groups:0", "groups:2.5", "groups:2:3", "vmap", "all:2", "",
+                "each:2", "auto:1"):  # fmt: skip
+        with pytest.raises(ValueError, match="valid: 'auto', 'each', 'all' or 'groups:G'"):
             parse_policy(bad)
 
     scene = Pendulum()
@@ -193,6 +197,62 @@ def test_sweep_policy_is_parsed_recorded_and_checked_on_resume(tmp_path):
         sweep(scene, grid, str(tmp_path / "all"), policy="groups:2", resume=True, **common)
 
 
+def test_auto_runs_a_small_sweep_case_by_case_and_a_large_one_vmapped():
+    from jaxdeploy.sweep import AUTO_EACH_MAX_CASES, resolve_policy
+
+    auto = {"kind": "auto"}
+    assert resolve_policy(auto, 1) == resolve_policy(auto, AUTO_EACH_MAX_CASES) == {"kind": "each"}
+    assert resolve_policy(auto, AUTO_EACH_MAX_CASES + 1) == {"kind": "all"}
+    assert resolve_policy(auto, 3, process_count=2) == {"kind": "all"}  # jax.distributed
+    groups = {"kind": "groups", "group_size": 2}
+    assert resolve_policy(groups, 3) == groups
+    with pytest.raises(ValueError, match="every case in every process"):
+        resolve_policy({"kind": "each"}, 3, process_count=2)
+
+
+def test_a_case_run_alone_is_the_single_run_bit_for_bit_and_resumes_as_started(tmp_path):
+    """Policy `each` (what `auto` takes for a small sweep): every case is `run_scene` of its
+    parameters, bit for bit (q, q̇, steps), its features `evaluate` of that run; a chunk's
+    padding (3 cases in chunks of 2) is not run twice; a sweep stopped after its first chunk
+    and resumed with the default policy finishes as it was started, with the same cases."""
+    from jaxdeploy.batch import run_scene
+    from jaxdeploy.mechanism import without_balance_meter
+    from jaxdeploy.scenes import Pendulum
+    from jaxdeploy.sweep import sweep
+
+    scene = Pendulum()
+    grid = {"initial_angle": [0.3, -1.2, 2.5]}
+    control = {"rtol": 1e-7, "atol": 1e-9}
+    common = dict(t_end=0.3, n_save=11, control=control, chunk_size=2, energy_meter=True)
+    ran = []
+
+    def evaluate(params, trajectory):
+        return {"last_angle": trajectory.q[-1, 2] + 0.0 * params["initial_angle"]}
+
+    def summarize(params, trajectory):
+        ran.append(params["initial_angle"])
+        return {"steps": int(trajectory.stats["num_accepted_steps"])}
+
+    out = str(tmp_path / "each")
+    with pytest.raises(KeyboardInterrupt):
+        sweep(scene, grid, out, stop_after_chunks=1, evaluate=evaluate, features="last_angle",
+              summarize=summarize, **common)  # fmt: skip
+    manifest = sweep(scene, grid, out, resume=True, evaluate=evaluate, features="last_angle",
+                     summarize=summarize, **common)  # fmt: skip
+    assert manifest["definition"]["policy"] == {"kind": "each"}
+    assert manifest["devices"] and len(manifest["chunks"]) == 2
+    assert sorted(ran) == sorted(grid["initial_angle"])  # each case once, padding not run
+    swept = load_sweep(out)
+    for i, angle in enumerate(grid["initial_angle"]):
+        params = scene.resolve_params({"initial_angle": angle})
+        single = run_scene(scene, params, 0.3, n_save=11, control=control, energy_meter=True)
+        np.testing.assert_array_equal(swept["q"][i], single.q)
+        np.testing.assert_array_equal(swept["v"][i], single.v)
+        assert swept["num_steps"][i] == int(single.stats["num_accepted_steps"])
+        plain = without_balance_meter(single)
+        assert swept["feature_last_angle"][i] == float(plain.q[-1, 2])
+
+
 def test_sweep_cli_refuses_a_bad_policy(tmp_path):
     from jaxdeploy.cli import main
 
@@ -212,7 +272,8 @@ def test_a_sweep_uses_one_device_per_core_unless_told(tmp_path):
     env = _env(tmp_path / "cache")
     del env["XLA_FLAGS"]  # the environment does not fix the device count here
     env.pop("JAX_NUM_CPU_DEVICES", None)
-    small = ["--grid", "initial_angle=0.0,0.3", "--t-end", "0.05", "--n-save", "5", "--quiet"]
+    small = ["--grid", "initial_angle=0.0,0.3", "--t-end", "0.05", "--n-save", "5", "--quiet",
+             "--policy", "all"]  # fmt: skip
 
     def sweep(out, *extra):
         command = [sys.executable, "-m", "jaxdeploy.cli", "sweep", "--scene", "pendulum"]
@@ -225,6 +286,11 @@ def test_a_sweep_uses_one_device_per_core_unless_told(tmp_path):
 
     assert len(sweep(tmp_path / "default")) == usable_cores()
     assert len(sweep(tmp_path / "one", "--devices", "1")) == 1
+    # A sweep whose cases run alone (`each`) keeps one device: a process of several keeps
+    # no compiled program in the program cache; its cases use the cores as threads.
+    small.remove("all")
+    small.remove("--policy")
+    assert len(sweep(tmp_path / "each")) == 1  # `auto`: two cases run alone
 
     from jaxdeploy.commands.sweep import _resumed_devices
 
@@ -284,7 +350,7 @@ def test_a_sharded_deploy_array_sweep_finishes(tmp_path):
     out = tmp_path / "out"
     command = [sys.executable, "-m", "jaxdeploy.cli", "sweep", "--scene", "deploy_array",
                "--grid", "spring_stiffness=1.2:1.8:4", "--t-end", "0.1", "--long-run",
-               "--quiet", "--out", str(out)]  # fmt: skip
+               "--policy", "all", "--quiet", "--out", str(out)]  # fmt: skip
     # 24 s here; without the guard it was still waiting after 200 s (18 CPU-s, then idle).
     done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr

@@ -1,7 +1,8 @@
 """`jaxdeploy sweep --scene S --grid NAME=v1,v2,... --out DIR [--resume] [--policy P]`: run the
-Cartesian product of parameter values as batched chunks sharded over all devices, written
-chunk by chunk, resumable (see `jaxdeploy.sweep`); then every finished case's features
-(summary quantities, objective terms) as features.csv/features.json and overview.png."""
+Cartesian product of parameter values, each case alone on every core (a small sweep) or as
+batched chunks sharded over all devices, written chunk by chunk, resumable (see
+`jaxdeploy.sweep`); then every finished case's features (summary quantities, objective
+terms) as features.csv/features.json and overview.png."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from ._args import (
     OBJECTIVE_PRESETS,
     SCENE_OPTION_HELP,
     SET_HELP,
+    SWEEP_AUTO_EACH_MAX_CASES,
     SWEEP_CHUNK_SIZE,
     add_step_control,
     check_used,
@@ -26,7 +28,7 @@ from ._args import (
 )
 
 NAME = "sweep"
-HELP = "parameter sweep: vmapped, sharded, chunked, resumable"
+HELP = "parameter sweep: case by case or vmapped and sharded, chunked, resumable"
 
 
 def add_arguments(parser) -> None:
@@ -72,8 +74,11 @@ def add_arguments(parser) -> None:
         "--policy",
         default=None,
         metavar="POLICY",
-        help="how each device batches its cases: all (one vmap, the default) or groups:G "
-        "(vmapped groups of G one after another); recorded in the manifest",
+        help="how the cases run: each (every case alone, as `jaxdeploy simulate` runs it, "
+        "on every core; its compiled programs are kept), all (one vmap per device) or "
+        "groups:G (vmapped groups of G one after another); default auto: each for at most "
+        f"{SWEEP_AUTO_EACH_MAX_CASES} cases, else all (a resumed sweep: as it was started); "
+        "recorded in the manifest",
     )
     parser.add_argument(
         "--objective",
@@ -246,7 +251,28 @@ def _host_devices(args) -> str | None:
     if args.distributed:
         return "--devices does not apply with --distributed" if args.devices else None
     resumed = _resumed_devices(args.out) if args.resume and args.devices is None else None
+    if resumed is None and args.devices is None and _runs_each_case_alone(args):
+        # One device: a process of several never keeps a compiled program in the program
+        # cache (`_program_cache._executable`); the cases use every core as threads.
+        resumed = 1
     return split_host(args.devices, resumed)
+
+
+def _runs_each_case_alone(args) -> bool:
+    """Whether a new sweep of these arguments runs by the policy `each`
+    (`jaxdeploy.sweep.resolve_policy`; False for a malformed --policy or --grid, which
+    `_validate` refuses)."""
+    from ..sweep import DEFAULT_POLICY, parse_policy, resolve_policy
+
+    try:
+        policy = parse_policy(DEFAULT_POLICY if args.policy is None else args.policy)
+        grid = parse_grid(args.grid)
+    except ValueError:
+        return False
+    n_cases = 1
+    for values in grid.values():
+        n_cases *= len(values)
+    return resolve_policy(policy, n_cases)["kind"] == "each"
 
 
 def _resumed_devices(out: str | None) -> int | None:
