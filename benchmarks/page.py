@@ -794,7 +794,38 @@ def simulate_phases(s: dict) -> list[str]:
             lines.append(f"| {name.removesuffix('_s')} | {what} | {values[0]} | {values[1]} |")
     lines.append(f"| total | the whole command | {s['cold_s']:.2f} | {s['warm_s']:.2f} |")
     lines.append("")
+    lines += warm_run_bound(s)
     return lines
+
+
+SIMULATE_WARM_GOAL_S = 3.0  # issue 32: `jaxdeploy simulate deploy_array` warm
+
+
+def warm_run_bound(s: dict) -> list[str]:
+    """What bounds the warm command: its integration's steps and their cost, against what the
+    goal leaves the integration once the other phases are paid."""
+    steps, warm = s.get("warm_steps") or {}, s["warm_phases"]
+    accepted, rejected = steps.get("n_steps"), steps.get("n_rejected")
+    if not accepted or rejected is None:
+        return []
+    taken = accepted + rejected
+    integrate = warm["integrate_s"]
+    rest = s["warm_s"] - integrate
+    left = SIMULATE_WARM_GOAL_S - rest
+    if left > 0:
+        need = (
+            f"the {SIMULATE_WARM_GOAL_S:g} s goal leaves the integration {left:.2f} s, "
+            f"{1e6 * left / taken:.0f} µs a step ({integrate / left:.1f}× faster than this)"
+        )
+    else:
+        need = f"the other phases alone take the {SIMULATE_WARM_GOAL_S:g} s goal"
+    return [
+        f"**What bounds the warm command.** Its integration: {accepted} accepted and "
+        f"{rejected} rejected steps in {integrate:.2f} s, {1e6 * integrate / taken:.0f} µs a "
+        f"step (with the contact-history programs beside it); the other phases take "
+        f"{rest:.2f} s. With them as they are, {need}.",
+        "",
+    ]
 
 
 def _program(run) -> str:

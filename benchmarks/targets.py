@@ -488,4 +488,5 @@ def simulate_cold_warm(scene: str = "deploy_array") -> dict:
                 "start_up_s": wall - summary["wall_time_s"],
                 **summary["phases"],
             }
+            out[f"{run}_steps"] = {k: summary.get(k) for k in ("n_steps", "n_rejected")}
     return out

@@ -452,6 +452,25 @@ def test_simulate_phases_render_cold_and_warm_side_by_side():
     assert page.simulate_phases(dict(scene="deploy_array", cold_s=30.0, warm_s=4.0)) == []
 
 
+def test_the_warm_commands_bound_is_its_steps_against_what_the_goal_leaves_them():
+    """`warm_run_bound`: the warm run's steps and their cost, and what the 3 s goal leaves the
+    integration after the other phases (or that they alone exceed it); nothing without the
+    step counts (an older JSON)."""
+    from benchmarks import page
+
+    s = dict(scene="deploy_array", cold_s=30.0, warm_s=7.0,
+             warm_phases={"start_up_s": 1.5, "integrate_s": 4.0},
+             warm_steps={"n_steps": 18000, "n_rejected": 2000})  # fmt: skip
+    text = " ".join(page.warm_run_bound(s))
+    assert "18000 accepted and 2000 rejected steps in 4.00 s, 200 µs a step" in text
+    assert "the other phases take 3.00 s" in text
+    assert "the other phases alone take the 3 s goal" in text
+    s["warm_s"] = 6.0  # the others 2.0 s: 1.0 s left, 50 µs a step, 4x faster
+    text = " ".join(page.warm_run_bound(s))
+    assert "leaves the integration 1.00 s, 50 µs a step (4.0× faster than this)" in text
+    assert page.warm_run_bound({**s, "warm_steps": None}) == []
+
+
 def test_step_cost_ratio_is_the_marginal_cost_per_step_when_both_step_sizes_ran():
     ours, exu = "jaxdeploy generalized-α fixed", "Exudyn generalized-α (python force)"
     rows = [
