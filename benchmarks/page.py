@@ -602,7 +602,7 @@ def whole_process_targets(w: dict) -> list[str]:
         default = sw["default"]
         how = f"{default['first']['policy']}, {default['first']['devices']} device(s)"
         for name, flags in (
-            ("vmap, every core", "--policy all"),
+            ("each case alone", "--policy each"),
             ("vmap, one device", "--policy all --devices 1"),
         ):
             for run, what in (("first", "empty caches"), ("second", "caches filled")):
@@ -729,21 +729,23 @@ def whole_process_section(w: dict) -> list[str]:
     sw = w.get("sweep")
     if sw:
         lines += [
-            f"`{sw['command']}`: by default (`--policy auto`) a sweep of at most 64 cases runs "
-            "each case alone, as `jaxdeploy simulate` runs it, on one JAX device with a thread "
-            f"per usable core ({sw['cores']} here), its programs kept in the program cache; "
-            "`--policy all` runs its chunk as one vmap sharded over one device per core "
-            "(`--devices N` chooses the count). Each twice in new processes (empty caches, then "
-            "the caches the first filled). The chunk's wall time is from the sweep's manifest; "
-            "the rest of the process is start-up, the run-length probe (which makes the "
-            "chunk's programs: a sharded sweep's are not kept in the program cache, so its "
-            "second process traces them again) and the files.",
+            f"`{sw['command']}`: by default (`--policy auto`) a sweep of more than two cases "
+            f"per usable core ({sw['cores']} here) runs its chunk as one vmap sharded over one "
+            "device per core, as `--policy all` does, and a smaller one each case alone, as "
+            "`jaxdeploy simulate` runs it (a thread per core, its programs kept in the program "
+            "cache): here the default against `--policy each` and against `--policy all "
+            "--devices 1`, the vmap on one device (`--devices N` chooses the count). Each "
+            "twice in new processes (empty caches, then the caches the first filled). The "
+            "chunk's wall time is from the sweep's manifest; the rest of the process is "
+            "start-up, the run-length probe (which makes the chunk's programs: a sharded "
+            "sweep's are not kept in the program cache, so its second process traces them "
+            "again) and the files.",
             "",
             "| configuration | policy | devices | run | whole process wall [s] | CPU [s] "
             "| the chunk [s] |",
             "|---|---|---|---|---|---|---|",
         ]
-        for name in ("default", "vmap, every core", "vmap, one device"):
+        for name in ("default", "each case alone", "vmap, one device"):
             for run in ("first", "second"):
                 r = sw[name][run]
                 lines.append(

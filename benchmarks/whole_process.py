@@ -11,9 +11,9 @@ whole-process`): interpreter start, imports, build, compile or cache load, solve
 * A Python script (README's "Python" example: `jd.enable_caches(...)`, the slider-crank with
   clearance 1e-4 m, Tsit5 at rtol 1e-8) run twice in new processes with one cache folder: the
   wall and CPU time from the end of `import jaxdeploy` to its first `simulate` result.
-* `jaxdeploy sweep` of 16 deploy_array cases as it runs by default (each case alone, a thread
-  per core) against its vmapped chunk sharded over one device per core and on one device,
-  each with empty and then filled caches (`sweep_on_every_core`).
+* `jaxdeploy sweep` of 16 deploy_array cases as it runs by default (its vmapped chunk sharded
+  over one device per usable core) against each case alone and the vmapped chunk on one
+  device, each with empty and then filled caches (`sweep_on_every_core`).
 
 Wall time from the parent (`time.perf_counter` around the child), CPU time of the child's
 process tree (`RUSAGE_CHILDREN`, user + system, which other jobs' load does not inflate).
@@ -166,21 +166,22 @@ SWEEP = ("sweep", "--scene", "deploy_array", "--grid", "spring_stiffness=1.2:1.8
          "--t-end", "0.6", "--quiet", "--long-run")  # fmt: skip
 
 
-# The sweep's configurations: its default (16 cases: `auto` runs each case alone, one device,
-# a thread per core), and the vmapped chunk sharded over one device per core and on one device.
+# The sweep's configurations: its default (16 cases on 2 cores: `auto` takes the vmapped chunk
+# sharded over one device per core), each case alone (one device, a thread per core) and the
+# vmapped chunk on one device.
 SWEEP_CONFIGURATIONS = (
     ("default", ()),
-    ("vmap, every core", ("--policy", "all")),
+    ("each case alone", ("--policy", "each")),
     ("vmap, one device", ("--policy", "all", "--devices", "1")),
 )
 
 
 def sweep_on_every_core() -> dict:
-    """`jaxdeploy sweep` (`SWEEP`) as it runs by default against its vmapped chunk on one
-    device per usable core and on one device (`SWEEP_CONFIGURATIONS`), each twice in new
-    processes: first with empty caches, then with the caches the first filled. Wall and CPU
-    time of each process, its policy and devices, and the chunk's own wall time from its
-    manifest; the ratios of each vmapped configuration to the default."""
+    """`jaxdeploy sweep` (`SWEEP`) as it runs by default against each case alone and the
+    vmapped chunk on one device (`SWEEP_CONFIGURATIONS`), each twice in new processes: first
+    with empty caches, then with the caches the first filled. Wall and CPU time of each
+    process, its policy and devices, and the chunk's own wall time from its manifest; the
+    ratio of each other configuration to the default."""
     from jaxdeploy.commands._devices import usable_cores
 
     out = {"command": "jaxdeploy " + " ".join(SWEEP), "cores": usable_cores()}

@@ -10,7 +10,7 @@ case, dropped on output), so memory is bounded by one chunk, whatever the number
 Each device batches its shard by the sweep's `policy` (one vmap of its shard, or vmapped
 groups), or, with the policy `each`, each case runs alone, as `simulate` runs it, two at a
 time on a machine of two cores (`parse_policy`; `auto`, the default, takes `each` for a sweep
-of at most `AUTO_EACH_MAX_CASES` cases).
+of at most `AUTO_EACH_CASES_PER_CORE` cases per core).
 
 Each finished chunk is written atomically as `chunk_NNNNN.npz` (case indices, parameters,
 status, step counts, optional per-case features, summaries and trajectories), then recorded in
@@ -60,22 +60,24 @@ from .solvers.step_control import StepControl
 
 MANIFEST = "manifest.json"
 # How each chunk is batched (`parse_policy`): `auto`, which takes `each` (every case alone)
-# for a sweep of at most `AUTO_EACH_MAX_CASES` cases and `all` (one vmap of each device's
-# shard) for a larger one. (Lanes refilled from the pending cases, the default before, cost
-# more per simulation than a plain vmap on slider_crank and were removed.)
+# for a sweep of at most `AUTO_EACH_CASES_PER_CORE` cases per usable core and `all` (one vmap
+# of each device's shard) for a larger one. (Lanes refilled from the pending cases, the
+# default before, cost more per simulation than a plain vmap on slider_crank and were removed.)
 DEFAULT_POLICY = "auto"
 DEFAULT_CHUNK_SIZE = 64
-# Why `each` up to this many cases: a vmapped program is another compile than the single run
-# of `jaxdeploy simulate` and `jaxdeploy.simulate` (slider_crank: 13.5 s against 8.4 s,
+# Why `each` for a few cases: a vmapped program is another compile than the single run of
+# `jaxdeploy simulate` and `jaxdeploy.simulate` (slider_crank: 13.5 s against 8.4 s,
 # docs/performance.md), and a sharded one is never kept in the program cache, so every sweep
-# process traces it again; the vmap then saves at most ~22 % per case (slider_crank's
-# 256-case batch: 1.28x one at a time, per simulation). Cases run alone reuse the single
-# run's kept programs (a sweep after a `simulate` of the scene, or a second sweep of the same
-# shapes, compiles nothing) and run two at a time on two cores. The tour's three-case sweep
-# of slider_crank, measured in one process after two `jaxdeploy simulate` runs had filled the
-# caches: 20.0 s vmapped and sharded, 9.6 s each alone (9.2 s compiling the single run's
-# program for the sweep's 201 saved times), 3.5 s in a second process.
-AUTO_EACH_MAX_CASES = 64
+# process traces it again; cases run alone reuse the single run's kept programs and run as
+# threads on every core. Why only a few: small dense linear algebra costs per operation, so a
+# vmap's lanes share most of a step's cost, and each case alone pays its own dispatch (scene
+# build, assembly and the run's arguments in Python). Measured on 2 cores, whole processes,
+# with empty caches and then the caches the first filled (`jaxdeploy sweep`, deploy_array to
+# 0.6 s over spring stiffness; slider_crank after two `jaxdeploy simulate` runs of it):
+#   slider_crank, 3 cases   each 12.7 s, again 4.2 s     vmapped on 2 devices 20.0 s
+#   deploy_array, 4 cases   each 54.6 s, again 20.9 s    vmapped 52.4 s, again 28.7 s
+#   deploy_array, 16 cases  each 100.9 s, again 58.6 s   vmapped 60.2 s, again 33.5 s
+AUTO_EACH_CASES_PER_CORE = 2
 
 
 def parse_policy(text: str) -> dict:
@@ -100,11 +102,14 @@ def parse_policy(text: str) -> dict:
     )
 
 
-def resolve_policy(policy: dict, n_cases: int, process_count: int = 1) -> dict:
-    """The policy a sweep of `n_cases` runs by: `auto` is `each` up to `AUTO_EACH_MAX_CASES`
-    cases (the reason is beside it), else `all`; and `all` in a sweep of several processes
-    (`jax.distributed`), whose chunks are one program over every host's devices. `each` is
-    refused there: every process would run every case."""
+def resolve_policy(
+    policy: dict, n_cases: int, process_count: int = 1, cores: int | None = None
+) -> dict:
+    """The policy a sweep of `n_cases` runs by: `auto` is `each` up to
+    `AUTO_EACH_CASES_PER_CORE` cases per core (`cores`, default the usable cores of this
+    process; the reason is beside the constant), else `all`; and `all` in a sweep of several
+    processes (`jax.distributed`), whose chunks are one program over every host's devices.
+    `each` is refused there: every process would run every case."""
     if policy["kind"] == "each" and process_count > 1:
         raise ValueError(
             "policy = 'each' runs every case in every process of a distributed sweep; use "
@@ -112,7 +117,8 @@ def resolve_policy(policy: dict, n_cases: int, process_count: int = 1) -> dict:
         )
     if policy["kind"] != "auto":
         return policy
-    if process_count == 1 and n_cases <= AUTO_EACH_MAX_CASES:
+    cores = _usable_cores() if cores is None else cores
+    if process_count == 1 and n_cases <= AUTO_EACH_CASES_PER_CORE * cores:
         return {"kind": "each"}
     return {"kind": "all"}
 
@@ -308,7 +314,8 @@ def sweep(
       `simulate` runs it, as many at a time as the process may use cores; its programs are
       the single run's, kept in the program cache), `"all"` (one vmap of each device's shard)
       or `"groups:G"`; `"auto"` (default `DEFAULT_POLICY`) takes `"each"` for at most
-      `AUTO_EACH_MAX_CASES` cases, else `"all"` (resumed: as the sweep was started).
+      `AUTO_EACH_CASES_PER_CORE` cases per usable core, else `"all"` (resumed: as the sweep
+      was started).
       Recorded in the definition, resolved: it can change a case's round-off and hence its
       steps.
     - `resume`: continue a sweep in `out_dir` (its definition must match); without it a

@@ -595,9 +595,9 @@ def test_start_up_imports_are_summed_by_package_and_rendered():
 
 
 def test_sweep_rows_render_the_default_against_the_vmapped_chunk():
-    """The sweep's rows (issue 32, batch on every core): the default (each case alone) against
-    the vmapped chunk on every core and on one device, whole processes, and the section's
-    table with each configuration's policy, devices and chunk time."""
+    """The sweep's rows (issue 32, batch on every core): the default against each case alone
+    and the vmapped chunk on one device, whole processes, and the section's table with each
+    configuration's policy, devices and chunk time."""
     from benchmarks import page
 
     def run(wall, chunk, devices, policy):
@@ -608,29 +608,29 @@ def test_sweep_rows_render_the_default_against_the_vmapped_chunk():
         "sweep": {
             "command": "jaxdeploy sweep --scene deploy_array",
             "cores": 2,
-            "default": {"first": run(30.0, 12.0, 1, "each"), "second": run(15.0, 11.0, 1, "each")},
-            "vmap, every core": {
-                "first": run(45.0, 10.0, 2, "all"),
-                "second": run(24.0, 7.0, 2, "all"),
+            "default": {"first": run(30.0, 12.0, 2, "all"), "second": run(15.0, 11.0, 2, "all")},
+            "each case alone": {
+                "first": run(45.0, 10.0, 1, "each"),
+                "second": run(24.0, 7.0, 1, "each"),
             },
             "vmap, one device": {
                 "first": run(60.0, 15.0, 1, "all"),
                 "second": run(30.0, 14.0, 1, "all"),
             },
-            "vmap, every core/first_ratio": 1.5,
-            "vmap, every core/second_ratio": 1.6,
+            "each case alone/first_ratio": 1.5,
+            "each case alone/second_ratio": 1.6,
             "vmap, one device/first_ratio": 2.0,
             "vmap, one device/second_ratio": 2.0,
         }
     }
     rows = "\n".join(page.whole_process_targets(w))
     assert (
-        "caches filled: `--policy all` / default (each, 1 device(s)), whole process | 1.60× "
+        "caches filled: `--policy each` / default (all, 2 device(s)), whole process | 1.60× "
         "(24.0 s / 15.0 s)" in rows
     )
-    assert "empty caches: `--policy all --devices 1` / default (each, 1 device(s))" in rows
+    assert "empty caches: `--policy all --devices 1` / default (all, 2 device(s))" in rows
     section = "\n".join(page.whole_process_section(w))
-    assert "| default | each | 1 | second | 15.0 | 16.0 | 11.0 |" in section
+    assert "| default | all | 2 | second | 15.0 | 16.0 | 11.0 |" in section
     assert "| vmap, one device | all | 1 | first | 60.0 | 61.0 | 15.0 |" in section
 
 

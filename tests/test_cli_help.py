@@ -38,10 +38,10 @@ def test_every_option_states_its_default_and_unit(command, action):
 def test_numbers_the_help_names_agree_with_the_package():
     from jaxdeploy.fit import RTOL_FLOOR
     from jaxdeploy.objectives import PRESETS
-    from jaxdeploy.sweep import AUTO_EACH_MAX_CASES, DEFAULT_CHUNK_SIZE
+    from jaxdeploy.sweep import AUTO_EACH_CASES_PER_CORE, DEFAULT_CHUNK_SIZE
 
     assert _args.SWEEP_CHUNK_SIZE == DEFAULT_CHUNK_SIZE
-    assert _args.SWEEP_AUTO_EACH_MAX_CASES == AUTO_EACH_MAX_CASES
+    assert _args.SWEEP_AUTO_EACH_CASES_PER_CORE == AUTO_EACH_CASES_PER_CORE
     assert tuple(_args.OBJECTIVE_PRESETS) == tuple(PRESETS)
     assert _args.RTOL_FLOOR == RTOL_FLOOR
 

@@ -198,12 +198,14 @@ def test_sweep_policy_is_parsed_recorded_and_checked_on_resume(tmp_path):
 
 
 def test_auto_runs_a_small_sweep_case_by_case_and_a_large_one_vmapped():
-    from jaxdeploy.sweep import AUTO_EACH_MAX_CASES, resolve_policy
+    from jaxdeploy.sweep import AUTO_EACH_CASES_PER_CORE, resolve_policy
 
-    auto = {"kind": "auto"}
-    assert resolve_policy(auto, 1) == resolve_policy(auto, AUTO_EACH_MAX_CASES) == {"kind": "each"}
-    assert resolve_policy(auto, AUTO_EACH_MAX_CASES + 1) == {"kind": "all"}
-    assert resolve_policy(auto, 3, process_count=2) == {"kind": "all"}  # jax.distributed
+    auto, most = {"kind": "auto"}, 2 * AUTO_EACH_CASES_PER_CORE  # on two cores
+    assert resolve_policy(auto, 1, cores=2) == resolve_policy(auto, most, cores=2)
+    assert resolve_policy(auto, most, cores=2) == {"kind": "each"}
+    assert resolve_policy(auto, most + 1, cores=2) == {"kind": "all"}
+    assert resolve_policy(auto, most + 1, cores=4) == {"kind": "each"}
+    assert resolve_policy(auto, 1, process_count=2) == {"kind": "all"}  # jax.distributed
     groups = {"kind": "groups", "group_size": 2}
     assert resolve_policy(groups, 3) == groups
     with pytest.raises(ValueError, match="every case in every process"):
@@ -214,7 +216,8 @@ def test_a_case_run_alone_is_the_single_run_bit_for_bit_and_resumes_as_started(t
     """Policy `each` (what `auto` takes for a small sweep): every case is `run_scene` of its
     parameters, bit for bit (q, q̇, steps), its features `evaluate` of that run; a chunk's
     padding (3 cases in chunks of 2) is not run twice; a sweep stopped after its first chunk
-    and resumed with the default policy finishes as it was started, with the same cases."""
+    and resumed with the default policy (`auto`) finishes as it was started, with the same
+    cases."""
     from jaxdeploy.batch import run_scene
     from jaxdeploy.mechanism import without_balance_meter
     from jaxdeploy.scenes import Pendulum
@@ -236,7 +239,7 @@ def test_a_case_run_alone_is_the_single_run_bit_for_bit_and_resumes_as_started(t
     out = str(tmp_path / "each")
     with pytest.raises(KeyboardInterrupt):
         sweep(scene, grid, out, stop_after_chunks=1, evaluate=evaluate, features="last_angle",
-              summarize=summarize, **common)  # fmt: skip
+              summarize=summarize, policy="each", **common)  # fmt: skip
     manifest = sweep(scene, grid, out, resume=True, evaluate=evaluate, features="last_angle",
                      summarize=summarize, **common)  # fmt: skip
     assert manifest["definition"]["policy"] == {"kind": "each"}

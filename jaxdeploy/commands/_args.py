@@ -22,10 +22,10 @@ from . import (  # noqa: F401 - the exit codes, for the command modules
 STEP_CONTROL_FLAGS = ("--solver", "--rtol", "--atol", "--dt-max", "--dt")
 # Named here for the help texts, which must not import JAX: the presets of
 # `jaxdeploy.objectives.PRESETS`, `jaxdeploy.sweep.DEFAULT_CHUNK_SIZE` and
-# `jaxdeploy.sweep.AUTO_EACH_MAX_CASES` (tests/test_cli_help.py checks that they agree).
+# `jaxdeploy.sweep.AUTO_EACH_CASES_PER_CORE` (tests/test_cli_help.py checks that they agree).
 OBJECTIVE_PRESETS = ("paper", "paper_reproducible", "quiet", "fast_decay")
 SWEEP_CHUNK_SIZE = 64
-SWEEP_AUTO_EACH_MAX_CASES = 64
+SWEEP_AUTO_EACH_CASES_PER_CORE = 2
 RTOL_FLOOR = 1e-10  # jaxdeploy.fit.RTOL_FLOOR: the tightest rtol the fit chooses
 SET_HELP = (
     "scene parameter NAME=VALUE in SI units (repeatable, each NAME once); `jaxdeploy scenes "

@@ -16,7 +16,7 @@ from ._args import (
     OBJECTIVE_PRESETS,
     SCENE_OPTION_HELP,
     SET_HELP,
-    SWEEP_AUTO_EACH_MAX_CASES,
+    SWEEP_AUTO_EACH_CASES_PER_CORE,
     SWEEP_CHUNK_SIZE,
     add_step_control,
     check_used,
@@ -77,7 +77,8 @@ def add_arguments(parser) -> None:
         help="how the cases run: each (every case alone, as `jaxdeploy simulate` runs it, "
         "on every core; its compiled programs are kept), all (one vmap per device) or "
         "groups:G (vmapped groups of G one after another); default auto: each for at most "
-        f"{SWEEP_AUTO_EACH_MAX_CASES} cases, else all (a resumed sweep: as it was started); "
+        f"{SWEEP_AUTO_EACH_CASES_PER_CORE} cases per core, else all (a resumed sweep: as it "
+        "was started); "
         "recorded in the manifest",
     )
     parser.add_argument(
