@@ -198,12 +198,43 @@ SLOW_CASES = {
 }
 
 
+# Cases whose two programs XLA may round differently on some hosts. generalized-α's Newton
+# iterations: on a 2-core AMD EPYC (AVX2, no AVX-512; jaxlib 0.10.2) the loop's program and
+# diffeqsolve's round one operation apart at t = 7 µs (saved q 4.3e-19 m apart, below an
+# ulp of the coordinates' scale 0.17 m), accept/reject decisions then part (281 against 279
+# steps) and the runs end 7.4e-8 m apart, at rtol 1e-5; the same at 625ec5a, where CI's host
+# had them bit for bit. Checked there as round-off apart (`_assert_round_off_apart`).
+ROUNDED_APART_ON_SOME_HOSTS = {"generalized-α adaptive"}
+
+
+def _assert_round_off_apart(mech, run, outputs, rtol):
+    """diffeqsolve's run and the loop's, not bit for bit: both succeed, their saved q first
+    differ by at most a few ulps of the coordinates' scale (the same arithmetic, rounded
+    differently: a wrong formula or step would differ by far more where they first part),
+    and nowhere by more than the run's `rtol` of that scale (two runs of one tolerance on
+    step sequences that parted)."""
+    a, b = _diffrax(mech, run, outputs), _ours(mech, run, outputs)
+    assert int(a.result._value) == int(b.result._value) == 0
+    qa, qb = np.asarray(a.ys[0].q), np.asarray(b.ys.q)
+    scale = np.max(np.abs(qa))
+    apart = np.max(np.abs(qa - qb), axis=1)
+    first = apart[np.argmax(apart > 0)]
+    assert first <= 4 * np.finfo(float).eps * scale, f"first parted by {first:.3g}"
+    assert apart.max() <= rtol * scale, f"runs {apart.max():.3g} apart"
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case", list(SLOW_CASES))
 def test_a_long_compiling_run_is_bit_for_bit_diffrax_run(case):
     name, t_end, options, outputs = SLOW_CASES[case]
     mech, run = _scene_run(name, t_end, **options)
-    a, _ = _assert_same_run(mech, run, outputs)
+    try:
+        a, _ = _assert_same_run(mech, run, outputs)
+    except AssertionError:
+        if case not in ROUNDED_APART_ON_SOME_HOSTS:
+            raise
+        _assert_round_off_apart(mech, run, outputs, options["rtol"])
+        return
     assert a.result == dfx.RESULTS.successful
 
 
