@@ -44,6 +44,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._cores import usable_cores
 from ._validation import check_positive
 from .batch import batch_function, stack_cases, step_control
 from .io import (
@@ -117,7 +118,7 @@ def resolve_policy(
         )
     if policy["kind"] != "auto":
         return policy
-    cores = _usable_cores() if cores is None else cores
+    cores = usable_cores() if cores is None else cores
     if process_count == 1 and n_cases <= AUTO_EACH_CASES_PER_CORE * cores:
         return {"kind": "each"}
     return {"kind": "all"}
@@ -187,7 +188,7 @@ def _each_function(
         # thread-safe: whatever they leave of the warning filters is undone here.
         with (
             warnings.catch_warnings(),
-            concurrent.futures.ThreadPoolExecutor(_usable_cores()) as pool,
+            concurrent.futures.ThreadPoolExecutor(usable_cores()) as pool,
         ):
             rest = {i: pool.submit(case, rows[i], horizon, times) for i in distinct[1:]}
             try:
@@ -205,13 +206,6 @@ def _each_function(
             ) from None
 
     return run
-
-
-def _usable_cores() -> int:
-    """The cores this process may run on (its CPU affinity where the system has one)."""
-    if hasattr(os, "sched_getaffinity"):
-        return max(1, len(os.sched_getaffinity(0)))
-    return os.cpu_count() or 1
 
 
 def chunk_shape(chunk_size: int, n_cases: int, n_devices: int) -> int:

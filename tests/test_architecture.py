@@ -23,6 +23,7 @@ FLOORS = {
     "_read_ahead": 0,
     "_tracing": 0,
     "_xla_flags": 0,
+    "_cores": 0,
     "contact": 1,
     "mechanism": 2,
     "solvers": 3,

@@ -15,17 +15,12 @@ from __future__ import annotations
 
 import os
 
+from .._cores import usable_cores
+
 DEVICES_HELP = (
     "CPU devices the batch is sharded over, one core each, ≥ 1 (default: one per core this "
     "process may use)"
 )
-
-
-def usable_cores() -> int:
-    """The cores this process may run on (its CPU affinity where the system has one)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
 
 
 def fixed_by_environment() -> str | None:
