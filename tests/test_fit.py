@@ -467,11 +467,11 @@ def test_the_check_at_a_tighter_tolerance_keeps_the_method_and_compiles_nothing(
     here, traces = threading.current_thread(), []
 
     def listener(event, _seconds, **kwargs):
-        # The model's program (`tolerances_as_data`'s `run`), traced in this thread: a
+        # The model's program (`_model_program.jacobian`), traced in this thread: a
         # primitive's first op-by-op dispatch in the process is an event of its own.
         if (
             event == "/jax/core/compile/jaxpr_trace_duration"
-            and kwargs.get("fun_name") == "run"
+            and kwargs.get("fun_name") == "jacobian"
             and threading.current_thread() is here
         ):
             traces.append(event)
@@ -482,6 +482,7 @@ def test_the_check_at_a_tighter_tolerance_keeps_the_method_and_compiles_nothing(
     finally:  # only this listener: other tests' stay registered
         jax.monitoring.unregister_event_duration_listener(listener)
     assert traces == []
+    jax.clear_caches()  # the same description's program, traced and compiled anew
     expected = fresh(z, control=tight)
     assert ok and expected[2]
     np.testing.assert_array_equal(channels["journal_x"], expected[0]["journal_x"])

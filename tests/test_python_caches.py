@@ -168,3 +168,59 @@ def test_second_process_simulates_a_clearance_joint_without_tracing_anything(tmp
     assert second["traced"] == ["_linspace"], second["traced"]
     assert first["status"] == second["status"] == "ok"
     assert second["peak"] == first["peak"] and all(p > 0 for p in second["peak"])
+
+
+# A fit's model (`jaxdeploy.fit`): the forward-mode Jacobian of the channels, the program a
+# fit evaluates at every Levenberg–Marquardt step (`fit._model_program`).
+_FIT_MODEL_SCRIPT = """
+import json, sys
+from jax import monitoring
+
+traced = []
+def record(event, start, end, **kwargs):
+    if event == "/jax/core/compile/jaxpr_trace_duration":
+        traced.append(kwargs.get("fun_name"))
+monitoring.register_event_time_span_listener(record)
+
+import jaxdeploy as jd
+jd.enable_caches(sys.argv[1])
+import numpy as np
+from jaxdeploy.fit._fit import Model
+from jaxdeploy.fit._parameters import make_parameters
+
+scene = jd.get_scene("impact", damping="lankarani_nikravesh")
+base = scene.resolve_params({})
+params = make_parameters(scene, [sys.argv[2]], base)
+model = Model(scene, params, base, ["journal_x"], np.linspace(0.0, 6e-4, 31),
+              {"solver": "tsit5", "rtol": 1e-8, "atol": 1e-11}, {})
+channels, jacobian, ok = model(np.array([0.3]))
+print(json.dumps({"traced": traced, "ok": ok,
+                  "bits": [channels["journal_x"].tobytes().hex(),
+                           jacobian["journal_x"].tobytes().hex()]}))
+"""
+
+
+def _fit_model(tmp_path, cache, parameter):
+    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
+    proc = subprocess.run(
+        [sys.executable, "-c", _FIT_MODEL_SCRIPT, str(cache), parameter],
+        env=env, capture_output=True, text=True, cwd=tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_a_fits_model_is_traced_by_the_first_process_only(tmp_path):
+    """The fit's Jacobian program is kept by the program cache: a second process with the
+    same scene, fitted parameter bounds and step control (another guess: the program does
+    not depend on it) traces nothing of it and gives the first's result bit for bit; other
+    bounds are another program."""
+    cache = tmp_path / "cache"
+    first = _fit_model(tmp_path, cache, "restitution=0.6:0.05:0.99")
+    assert "exported_jacobian" in first["traced"], first["traced"]
+    second = _fit_model(tmp_path, cache, "restitution=0.7:0.05:0.99")
+    assert not [n for n in second["traced"] if n.startswith("exported_")], second["traced"]
+    assert "jacobian" not in second["traced"]
+    assert first["ok"] and second["ok"] and second["bits"] == first["bits"]
+    other = _fit_model(tmp_path, cache, "restitution=0.6:0.1:0.99")
+    assert "exported_jacobian" in other["traced"], other["traced"]

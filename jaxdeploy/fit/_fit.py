@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import _model_program
 from ._adequacy import assess
 from ._data import Measurements
 from ._parameters import FitParameter, internal_vector, make_parameters
@@ -283,49 +284,32 @@ class Model:
     """
 
     def __init__(self, scene, parameters, fixed, names, ts, control, simulate_options):
-        import diffrax as dfx
-        import jax
-
-        from ..batch import run_scene, step_control
-        from ..solvers import tolerances_as_data
+        from ..batch import step_control
         from ._derivatives import _adaptive
 
-        names = list(names)
-        ts = np.asarray(ts, dtype=float)
         self.control = step_control(scene, control)
         if _adaptive(self.control):
             # Adaptive steps: differentiate the run over its own accepted steps (see
             # `simulate(..., replay_steps=True)`), not a loop that re-decides them.
             simulate_options = {"replay_steps": True, **simulate_options}
-
-        self.ts = ts
-
-        def evaluate(z, ts_run, control):
-            params = dict(fixed)
-            for k, p in enumerate(parameters):
-                params[p.name] = p.to_physical(z[k])
-            traj = run_scene(
-                scene,
-                params,
-                ts_run[-1],
-                ts=ts_run,
-                control=control,
-                adjoint=dfx.ForwardMode(),
-                **simulate_options,
-            )
-            model = scene.select_channels(scene.build(params), traj, names)
-            ok = traj.result == dfx.RESULTS.successful
-            return model, (model, ok)
-
-        # The step control's tolerances are data of the compiled programs: the tolerance
+        self.ts = np.asarray(ts, dtype=float)
+        # The model's programs are module-level functions of a description of everything
+        # their trace depends on (`_model_program`), so the program cache keeps them between
+        # processes. The step control's tolerances are data of the programs: the tolerance
         # check's Jacobian at a 10x tighter rtol (`tolerance_check`, with the method kept:
         # `_schedule.tighter`) compiles nothing more.
-        self._jac = tolerances_as_data(
-            lambda c, z, t: jax.jacfwd(lambda w: evaluate(w, t, c), has_aux=True)(z)
-        )
-        self._batch = tolerances_as_data(
-            lambda c, zs, t: jax.vmap(lambda z: evaluate(z, t, c)[1])(zs)
-        )
+        self._parts = (scene, list(parameters), dict(fixed), list(names), dict(simulate_options))
+        self._specs = {}  # by structure: one spec object each (compared by identity if need be)
+
+    def _program(self, control):
+        """`(ModelSpec, rtol, atol)` of the model's programs at `control`."""
+        structure, rtol, atol = _model_program.tolerances(control)
+        if structure not in self._specs:
+            scene, parameters, fixed, names, options = self._parts
+            self._specs[structure] = _model_program.spec(
+                scene, parameters, fixed, names, structure, options
+            )
+        return self._specs[structure], rtol, atol
 
     def save_times(self, n: int | None = None) -> np.ndarray:
         """The first `n` save times, padded with the last of them to the compiled length."""
@@ -339,7 +323,8 @@ class Model:
         (only the first `n` samples are the save times; see `save_times`). `control`: as in
         `__call__`."""
         zs, ts = np.asarray(zs, dtype=float), self.save_times(n)
-        model, ok = self._batch(self.control if control is None else control, zs, ts)
+        spec, rtol, atol = self._program(self.control if control is None else control)
+        model, ok = _model_program.call(_model_program.channels_batch, spec, rtol, atol, zs, ts)
         return {n: np.asarray(v) for n, v in model.items()}, np.asarray(ok)
 
     def __call__(self, z, n: int | None = None, control=None):
@@ -347,7 +332,9 @@ class Model:
         `{name: (N, p)}`, of which the first `n` samples are the save times. `control`: a
         `StepControl` differing from the model's in its tolerances (default the model's)."""
         control = self.control if control is None else control
-        jac, (model, ok) = self._jac(control, np.asarray(z, dtype=float), self.save_times(n))
+        spec, rtol, atol = self._program(control)
+        z, ts = np.asarray(z, dtype=float), self.save_times(n)
+        jac, (model, ok) = _model_program.call(_model_program.jacobian, spec, rtol, atol, z, ts)
         model = {n: np.asarray(v) for n, v in model.items()}
         jac = {n: np.asarray(v) for n, v in jac.items()}
         ok = bool(ok) and all(np.all(np.isfinite(v)) for v in (*model.values(), *jac.values()))

@@ -69,16 +69,16 @@ def tighter(control):
     not switch from Tsit5 to Dopri8 where rtol crosses `solvers.AUTO_TIGHT_RTOL`.
 
     Why: the comparison at rtol/10 estimates the integration error of this run, the method's
-    error at this tolerance (Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.4: the run at
-    a 10x tighter tolerance is ~10x more accurate). The same method at rtol/10 is that
-    estimate, and it needs no program of its own: the tolerances are data of the compiled
-    programs (`solvers.tolerances_as_data`, the fit's `Model`), the method is not. Switching
-    to Dopri8 compiled a second program of each kind the fit runs (the channels and their
-    Jacobian). The README's slider_crank fit from an empty cache (2-core AMD EPYC, one
-    process each): 37.3 s wall, 50.1 s user CPU with the switch; 26.4 s, 28.7 s with the
-    method kept; the same estimates and verdicts (rtol 1e-8, checked at 1e-9 by Dopri8 and
-    by Tsit5: the Jacobian changes by 0.008 and 0.0061, the model by 0.00013 and 0.00011
-    noise levels RMS).
+    error at this tolerance (Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.4: the run at a 10x
+    tighter tolerance is ~10x more accurate). The same method at rtol/10 is that estimate, and
+    it needs no program of its own: the tolerances are data of the compiled programs
+    (`solvers.tolerances_as_data`; the fit's `Model`, `_model_program.tolerances`), the method
+    is not. Switching to Dopri8 compiled a second program of each kind the fit runs (the
+    channels and their Jacobian). The README's slider_crank fit from an empty cache (2-core AMD
+    EPYC, one process each): 37.3 s wall, 50.1 s user CPU with the switch; 26.4 s, 28.7 s with
+    the method kept; the same estimates and verdicts (rtol 1e-8, checked at 1e-9 by Dopri8 and
+    by Tsit5: the Jacobian changes by 0.008 and 0.0061, the model by 0.00013 and 0.00011 noise
+    levels RMS).
     A search that moves to the tighter tolerance (`tighten`, `refit_until_reproducible`)
     keeps the method too."""
     return _scaled(control, 0.1).replace(solver=control.resolved_solver())

@@ -1,0 +1,155 @@
+"""The fit's model as programs the program cache keeps between processes.
+
+`Model` (z → channels, their Jacobian d/dz, status) was a closure over the scene, the fitted
+parameters' bounds, the fixed parameter values and the step control, jit-compiled per step
+control (`solvers.tolerances_as_data`). A closure cannot be a key of `_program_cache` (what it
+closes over is not written down), so every process traced it again: slider_crank's
+forward-mode Jacobian over 4 ms (the README's fit) traced for 8–10 s and lowered for 3.3 s in
+every `jaxdeploy fit`, of a second run's 24 s (JAX's compilation cache skipped only XLA's
+compile).
+
+Here the same computation is a module-level function (`jacobian`, `channels_batch`) of a
+`ModelSpec`, whose one static field is everything the trace depends on, written down
+(`describe`): the scene's class and options, each fitted parameter's name and bounds (not its
+guess: the trace does not depend on it), the values of the parameters that are not fitted
+(concrete numbers choose a scene's composition, `scenes.base.is_exactly_zero`, so they stay
+constants of the program, as in the closure), the channels, the step control with its
+tolerances replaced by data, and the options passed to `simulate`. `_program_cache.call`
+then keeps the traced program and its executable: a second process with the same description
+traces nothing. A scene defined outside jaxdeploy (whose code the cache's key does not cover)
+or a description that cannot be written down keeps its object's identity as its key: it is
+traced in each process, as before.
+"""
+
+from __future__ import annotations
+
+import json
+
+import equinox as eqx
+import numpy as np
+
+from .. import _program_cache
+
+
+class _Described:
+    """A static value compared, hashed and printed by its description (`describe`): equal
+    descriptions trace to the same program. Without one (None) the value is compared by
+    identity and printed with its address, which `_program_cache.key` refuses to keep."""
+
+    __slots__ = ("value", "description")
+
+    def __init__(self, value, description: str | None):
+        self.value, self.description = value, description
+
+    def __eq__(self, other):
+        if not isinstance(other, _Described):
+            return NotImplemented
+        if self.description is None or other.description is None:
+            return self is other
+        return self.description == other.description
+
+    def __hash__(self):
+        return hash(self.description) if self.description is not None else id(self)
+
+    def __repr__(self):
+        if self.description is None:
+            return object.__repr__(self)  # "<... at 0x...>": not kept by the program cache
+        return f"FitModel({self.description})"
+
+
+class ModelSpec(eqx.Module):
+    """What the fit's model program is (`describe`), as the static part of its arguments."""
+
+    static: _Described = eqx.field(static=True)
+
+
+def describe(scene, parameters, base, names, control, simulate_options) -> str | None:
+    """The description that keys the program (module docstring), or None when it cannot be
+    written down exactly (a scene class outside jaxdeploy, an option JSON cannot hold)."""
+    cls = type(scene)
+    if not cls.__module__.startswith("jaxdeploy."):
+        return None
+    fitted = {p.name for p in parameters}
+    record = {
+        "scene": f"{cls.__module__}:{cls.__qualname__}",
+        "scene_options": scene.options,
+        "parameters": [[p.name, p.low, p.high] for p in parameters],
+        "fixed": {k: v for k, v in base.items() if k not in fitted},
+        "names": list(names),
+        "control": repr(control),
+        "simulate_options": {k: repr(v) for k, v in simulate_options.items()},
+    }
+    try:
+        return json.dumps(record, sort_keys=True, allow_nan=True)
+    except (TypeError, ValueError):
+        return None
+
+
+def tolerances(control):
+    """`(structure, rtol, atol)`: `control` with its tolerances as placeholders (the program's
+    structure; an automatic method resolved by the concrete rtol first) and the tolerances as
+    0-d arrays (0 where absent). A fixed-step control is its own structure."""
+    if not control.adaptive:
+        return control, np.zeros(()), np.zeros(())
+    has_rtol, has_atol = control.rtol is not None, control.atol is not None
+    structure = control.replace(
+        solver=control.resolved_solver(),
+        rtol=0.5 if has_rtol else None,
+        atol=1.0 if has_atol else None,
+    )
+    rtol = np.asarray(float(control.rtol) if has_rtol else 0.0)
+    atol = np.asarray(float(control.atol) if has_atol else 0.0)
+    return structure, rtol, atol
+
+
+def spec(scene, parameters, base, names, structure, simulate_options) -> ModelSpec:
+    """The `ModelSpec` of a fit's model at one step-control structure (`tolerances`)."""
+    value = (scene, tuple(parameters), dict(base), tuple(names), structure, dict(simulate_options))
+    description = describe(scene, parameters, base, names, structure, simulate_options)
+    return ModelSpec(_Described(value, description))
+
+
+def _evaluate(model: ModelSpec, z, ts, rtol, atol):
+    """`(channels, (channels, ok))` of the run at internal coordinates `z` (`FitParameter`)."""
+    import diffrax as dfx
+
+    from ..batch import run_scene
+
+    scene, parameters, base, names, structure, options = model.static.value
+    control = structure
+    if structure.adaptive:
+        control = structure.replace(
+            rtol=None if structure.rtol is None else rtol,
+            atol=None if structure.atol is None else atol,
+        )
+    params = dict(base)
+    for k, p in enumerate(parameters):
+        params[p.name] = p.to_physical(z[k])
+    traj = run_scene(
+        scene, params, ts[-1], ts=ts, control=control, adjoint=dfx.ForwardMode(), **options
+    )
+    channels = scene.select_channels(scene.build(params), traj, names)
+    ok = traj.result == dfx.RESULTS.successful
+    return channels, (channels, ok)
+
+
+@eqx.filter_jit
+def jacobian(model: ModelSpec, rtol, atol, z, ts):
+    """`(d channels/dz, (channels, ok))` at `z`: forward mode, one tangent per parameter."""
+    import jax
+
+    return jax.jacfwd(lambda w: _evaluate(model, w, ts, rtol, atol), has_aux=True)(z)
+
+
+@eqx.filter_jit
+def channels_batch(model: ModelSpec, rtol, atol, zs, ts):
+    """`(channels, ok)` of many points `zs` (k, p) as one vmapped batch."""
+    import jax
+
+    return jax.vmap(lambda z: _evaluate(model, z, ts, rtol, atol)[1])(zs)
+
+
+def call(function, model: ModelSpec, rtol, atol, z, ts):
+    """`function(model, rtol, atol, z, ts)` through the program cache (`_program_cache.call`:
+    a plain call when it is off or the model has no description)."""
+    return _program_cache.call(function, model, rtol, atol, np.asarray(z), np.asarray(ts))
