@@ -10,16 +10,23 @@ import sys
 
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-# A user's script: the scene, its initial state (an assembly program) and a run (the solve).
-# It prints the names of the functions JAX traced in this process and the run's output.
-_SCRIPT = """
-import json, sys
+# The scripts' record of what JAX traced in their process: the names of the functions, from
+# JAX's own compile events (`jax.monitoring`), in `traced`.
+_RECORD_TRACES = """
 from jax import monitoring
 
 traced = []
 def record(event, start, end, **kwargs):
     if event == "/jax/core/compile/jaxpr_trace_duration":
         traced.append(kwargs.get("fun_name"))
+"""
+
+# A user's script: the scene, its initial state (an assembly program) and a run (the solve).
+# It prints the names of the functions JAX traced in this process and the run's output.
+_SCRIPT = (
+    _RECORD_TRACES
+    + """
+import json, sys
 monitoring.register_event_time_span_listener(record)
 
 import jaxdeploy as jd
@@ -38,6 +45,7 @@ q = np.asarray(trajectory.q)
 print(json.dumps({"traced": traced, "q": q.tolist(), "bits": q.tobytes().hex(),
                   "status": trajectory.status()}))
 """
+)
 
 
 def _run(tmp_path, argument, **env_changes):
@@ -120,9 +128,10 @@ def test_caches_called_after_equinox_warn_and_keep_the_compilation_cache(tmp_pat
 # The run alone, recorded: with the programs read back, `simulate` and its verdict should run
 # no JAX operation outside them but the save times (JAX traces, lowers and looks up each one on
 # a process's first call: ~4 ms apiece, as much as the whole run of a short slider-crank).
-_RUN_ONLY_SCRIPT = """
+_RUN_ONLY_SCRIPT = (
+    _RECORD_TRACES
+    + """
 import json, sys
-from jax import monitoring
 
 import jaxdeploy as jd
 jd.enable_caches(sys.argv[1])
@@ -131,16 +140,13 @@ params = scene.resolve_params()
 mechanism = scene.build(params)
 initial = scene.initial_state(params, mechanism)
 
-traced = []
-def record(event, start, end, **kwargs):
-    if event == "/jax/core/compile/jaxpr_trace_duration":
-        traced.append(kwargs.get("fun_name"))
 monitoring.register_event_time_span_listener(record)
 trajectory = jd.simulate(mechanism, initial, 0.002, n_save=11, control=scene.default_control)
 status = trajectory.status()
 peak = trajectory.extremes["normal_force_max"]
 print(json.dumps({"traced": traced, "status": status, "peak": peak.tolist()}))
 """
+)
 
 
 def test_second_process_simulates_a_clearance_joint_without_tracing_anything(tmp_path):
@@ -172,14 +178,10 @@ def test_second_process_simulates_a_clearance_joint_without_tracing_anything(tmp
 
 # A fit's model (`jaxdeploy.fit`): the forward-mode Jacobian of the channels, the program a
 # fit evaluates at every Levenberg–Marquardt step (`fit._model_program`).
-_FIT_MODEL_SCRIPT = """
+_FIT_MODEL_SCRIPT = (
+    _RECORD_TRACES
+    + """
 import json, sys
-from jax import monitoring
-
-traced = []
-def record(event, start, end, **kwargs):
-    if event == "/jax/core/compile/jaxpr_trace_duration":
-        traced.append(kwargs.get("fun_name"))
 monitoring.register_event_time_span_listener(record)
 
 import jaxdeploy as jd
@@ -198,6 +200,7 @@ print(json.dumps({"traced": traced, "ok": ok,
                   "bits": [channels["journal_x"].tobytes().hex(),
                            jacobian["journal_x"].tobytes().hex()]}))
 """
+)
 
 
 def _fit_model(tmp_path, cache, parameter):
