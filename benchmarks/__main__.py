@@ -21,17 +21,23 @@ import time
 # The code whose changes make the page stale (tests/test_page_freshness.py).
 MEASURES = [
     "benchmarks",
+    "examples/slider_crank_slider_x.csv",
     "jaxdeploy/_compilation_cache.py",
     "jaxdeploy/_program_cache.py",
+    "jaxdeploy/_read_ahead.py",
     "jaxdeploy/analysis",
     "jaxdeploy/batch.py",
     "jaxdeploy/cli.py",
+    "jaxdeploy/commands/fit.py",
     "jaxdeploy/commands/simulate.py",
+    "jaxdeploy/commands/sweep.py",
     "jaxdeploy/contact",
+    "jaxdeploy/fit",
     "jaxdeploy/mechanism",
     "jaxdeploy/scenes",
     "jaxdeploy/simulation.py",
     "jaxdeploy/solvers",
+    "jaxdeploy/sweep.py",
     "tests/data/slider_crank_reference.npz",
 ]
 PINNED = ("work-precision", "andrews", "batch", "ceiling", "gradient")  # one core, both sides

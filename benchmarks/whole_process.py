@@ -11,6 +11,9 @@ whole-process`): interpreter start, imports, build, compile or cache load, solve
 * A Python script (README's "Python" example: `jd.enable_caches(...)`, the slider-crank with
   clearance 1e-4 m, Tsit5 at rtol 1e-8) run twice in new processes with one cache folder: the
   wall and CPU time from the end of `import jaxdeploy` to its first `simulate` result.
+* The README's `jaxdeploy fit` (slider_crank's clearance and restitution from
+  `examples/slider_crank_slider_x.csv`) twice in new processes with one cache folder: the
+  second reads the model's programs the first kept (`fit_second_process`).
 * `jaxdeploy sweep` of 16 deploy_array cases as it runs by default (its vmapped chunk sharded
   over one device per usable core) against each case alone and the vmapped chunk on one
   device, each with empty and then filled caches (`sweep_on_every_core`).
@@ -160,6 +163,36 @@ def python_script_second_process() -> dict:
     return out
 
 
+# The README's fit, as its tour runs it.
+FIT = ("fit", "examples/slider_crank_slider_x.csv", "--scene", "slider_crank",
+       "--params", "clearance=6e-4", "restitution=0.72", "--quiet")  # fmt: skip
+
+
+def fit_second_process(root: str = ".") -> dict:
+    """The README's fit (`FIT`) twice in new processes sharing one cache folder: each
+    process's wall and CPU time and the fit's own wall time (`fit.json`'s `wall_time_s`: the
+    fit and its refits, without start-up and files); the second process reads the model's
+    programs (its channels' Jacobian) the first traced and kept
+    (`jaxdeploy/fit/_model_program.py`), and must find the same estimates."""
+    out = {"command": "jaxdeploy " + " ".join(FIT)}
+    with tempfile.TemporaryDirectory() as tmp:
+        env = _environment(os.path.join(tmp, "cache"))
+        for run in ("first", "second"):
+            folder = os.path.join(tmp, run)
+            done = _run([sys.executable, "-m", "jaxdeploy.cli", *FIT, "--out", folder], env, root)
+            with open(os.path.join(folder, "fit.json"), encoding="utf-8") as f:
+                report = json.load(f)
+            out[run] = {
+                "wall_s": done["wall_s"],
+                "cpu_s": done["cpu_s"],
+                "fit_wall_s": report["wall_time_s"],
+                "estimates": report["estimates"],
+            }
+    out["identical"] = out["first"]["estimates"] == out["second"]["estimates"]
+    out["second_ratio"] = out["second"]["wall_s"] / out["first"]["wall_s"]
+    return out
+
+
 # A sweep as a design study starts one: 16 cases of deploy_array over the first 0.6 s (the
 # unfolding and the lock), one chunk.
 SWEEP = ("sweep", "--scene", "deploy_array", "--grid", "spring_stiffness=1.2:1.8:16",
@@ -257,5 +290,6 @@ def measure(root: str = ".") -> dict:
         "slider_crank": slider_crank_vs_script(root),
         "start_up_imports": start_up_imports(),
         "python_script": python_script_second_process(),
+        "fit": fit_second_process(root),
         "sweep": sweep_on_every_core(),
     }

@@ -537,6 +537,13 @@ def test_whole_process_rows_render_first_and_second_runs():
             first=run(9.0, 12.0, import_s=0.5, first_result_s=8.0, first_result_cpu_s=11.0),
             second=run(2.5, 2.6, import_s=0.5, first_result_s=0.8, first_result_cpu_s=0.9),
         ),
+        "fit": dict(
+            command="jaxdeploy fit examples/x.csv",
+            first=run(38.0, 45.0, fit_wall_s=26.0),
+            second=run(10.0, 13.0, fit_wall_s=5.5),
+            identical=True,
+            second_ratio=10.0 / 38.0,
+        ),
     }
     rows = "\n".join(page.whole_process_targets(w))
     assert "scipy LSODA script (rtol 1e-10), whole processes, first run, empty caches | " in rows
@@ -550,6 +557,8 @@ def test_whole_process_rows_render_first_and_second_runs():
     assert "start_up 1.00 / 1.50; build 0.50 / –; compile 6.00 / –" in section
     assert "| second | 0.50 | 0.80 | 0.90 | 2.50 | 2.60 |" in section
     assert "start-up's imports" not in section  # none measured: no sentence
+    assert "| second | 10.0 | 13.0 | 5.5 |" in section
+    assert "the same estimates bit for bit" in section
 
 
 def test_start_up_imports_are_summed_by_package_and_rendered():
