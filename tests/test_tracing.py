@@ -1,11 +1,13 @@
 """`traced_once`: a function called several times while one program is traced is traced once,
-gives the inline code's values, and runs as written on concrete arguments."""
+gives the inline code's values, and runs as written on concrete arguments. `batched_like`: the
+identity under every transformation, whose vmap gives every leaf the batch axis;
+`differentiated_like`: the identity whose JVP gives every float leaf a tangent."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxdeploy._tracing import traced_once
+from jaxdeploy._tracing import batched_like, differentiated_like, traced_once
 
 
 def test_traced_once_traces_once_per_program_and_matches_inline_code():
@@ -82,3 +84,115 @@ def test_simulate_program_traces_the_accelerations_once_for_its_call_sites():
     assert len(sites["_accelerations"]) >= 3
     assert len(set(sites["_accelerations"])) <= 2
     assert len(sites["project_onto_constraints"]) == 1
+
+
+def _loop(p, align):
+    """A while loop whose carry is partly unbatched at the start under a vmap over p (a
+    counter, a time that becomes batched through the body), as an integration loop's is."""
+    init = (jnp.zeros(3), jnp.array(0), jnp.array(0.0))
+    if align:
+        init = batched_like(init, p)
+
+    def body(c):
+        x, n, t = c
+        return x + p * jnp.cos(t), n + 1, t + 0.1 * p
+
+    return jax.lax.while_loop(lambda c: c[2] < 1.0, body, init)[0]
+
+
+def test_batched_like_is_the_identity_under_jit_vmap_and_derivatives():
+    ps = jnp.array([0.5, 0.7, 0.9])
+    cases = [
+        (lambda f: f, ps[0]),
+        (jax.jit, ps[0]),
+        (jax.vmap, ps),
+        (jax.jacfwd, ps[0]),
+        (lambda f: jax.vmap(jax.jacfwd(f)), ps),
+        (lambda f: jax.jacfwd(jax.vmap(f)), ps),
+    ]
+    for transform, arg in cases:
+        np.testing.assert_array_equal(
+            transform(lambda p: _loop(p, True))(arg), transform(lambda p: _loop(p, False))(arg)
+        )
+
+    # Reverse mode through the alignment (outside a loop, which reverse mode cannot take),
+    # alone and vmapped.
+    def g(p, align):
+        x = (jnp.full(3, p), jnp.array(0.0))
+        if align:
+            x = batched_like(x, p)
+        return jnp.sum(x[0] ** 2) + x[1]
+
+    for transform, arg in ((jax.grad, ps[0]), (lambda f: jax.vmap(jax.grad(f)), ps)):
+        np.testing.assert_array_equal(
+            transform(lambda p: g(p, True))(arg), transform(lambda p: g(p, False))(arg)
+        )
+    # Concrete values are returned as they are.
+    tree = (1.0, np.ones(2))
+    assert batched_like(tree, np.ones(3)) is tree
+
+
+def test_batched_like_batches_the_carry_in_one_round(monkeypatch):
+    """Under vmap the loop's carry is batched from the start: JAX's while-loop batching rule
+    batches the body once to find the batched carry (instead of once per part that becomes
+    batched) — counted at JAX's `batch_jaxpr`, the one internal this test leans on."""
+    counted = _counting_batches(monkeypatch)
+    ps = jnp.array([0.5, 0.7, 0.9])
+    rounds = {}
+    for align in (False, True):
+        counted.clear()
+        jax.make_jaxpr(jax.vmap(lambda p, a=align: _loop(p, a)))(ps)
+        rounds[align] = len(counted)
+    # Without: the counter and the time are unbatched at the start, the time becomes batched
+    # after one body, then the predicate: two rounds and the predicate's batching. With: one.
+    assert rounds[True] < rounds[False], rounds
+    np.testing.assert_array_equal(
+        jax.vmap(lambda p: _loop(p, True))(ps), jax.vmap(lambda p: _loop(p, False))(ps)
+    )
+
+
+def _forward_loop(p, align):
+    """A loop whose second carry part has no tangent at the start and one after the body,
+    as an integration loop's saved outputs under forward mode."""
+    init = (jnp.full(3, p), jnp.zeros(3), jnp.array(0))
+    if align:
+        init = differentiated_like(init, p)
+
+    def body(c):
+        x, saved, n = c
+        return x * 1.1, saved + x, n + 1
+
+    return jax.lax.while_loop(lambda c: c[2] < 5, body, init)[1]
+
+
+def _counting_batches(monkeypatch):
+    from jax._src.interpreters import batching
+
+    counted = []
+    original = batching.batch_jaxpr
+
+    def counting(*args, **kwargs):
+        counted.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(batching, "batch_jaxpr", counting)
+    return counted
+
+
+def test_differentiated_like_is_the_identity_and_saves_jacfwd_a_round(monkeypatch):
+    counted = _counting_batches(monkeypatch)
+    rounds, values = {}, {}
+    for align in (False, True):
+        counted.clear()
+        jax.make_jaxpr(jax.jacfwd(lambda p, a=align: _forward_loop(p, a)))(0.5)
+        rounds[align] = len(counted)
+        values[align] = (
+            jax.jacfwd(lambda p, a=align: _forward_loop(p, a))(0.5),
+            jax.jvp(lambda p, a=align: _forward_loop(p, a), (0.5,), (1.0,)),
+            jax.vmap(jax.jacfwd(lambda p, a=align: _forward_loop(p, a)))(jnp.array([0.5, 0.7])),
+            jax.jit(lambda p, a=align: _forward_loop(p, a))(0.5),
+        )
+    assert rounds[True] < rounds[False], rounds
+    aligned, plain = jax.tree.leaves(values[True]), jax.tree.leaves(values[False])
+    for a, b in zip(aligned, plain, strict=True):
+        np.testing.assert_array_equal(a, b)

@@ -61,6 +61,8 @@ import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 
+from .._tracing import batched_like, differentiated_like
+
 __all__ = ["KINDS", "Solution", "kind_for", "solve"]
 
 KINDS = ("lax", "checkpointed", "bounded")
@@ -163,6 +165,15 @@ def _never_jumps(controller, term, t0, t1, y0, dt0, error_order) -> bool:
     return made_jump is False
 
 
+def _fixed_steps(controller) -> bool:
+    """Whether `controller` (through its wrappers' `controller`) takes constant steps: then
+    the loop's time may be the same for every case of a vmap, and its carry stays partly
+    unbatched."""
+    while not isinstance(controller, dfx.ConstantStepSize) and hasattr(controller, "controller"):
+        controller = controller.controller
+    return isinstance(controller, dfx.ConstantStepSize)
+
+
 def _promote(x):
     """diffrax's promotion of the initial state to the time dtype (`diffeqsolve`)."""
     with jax.numpy_dtype_promotion("standard"):
@@ -257,6 +268,18 @@ def solve(
         step_ts=jnp.full(max_steps, jnp.inf) if save_steps else None,
         meter_state=meter.init(),
     )
+    if not _fixed_steps(controller):
+        # Adaptive steps: under vmap the loop's time, hence its predicate, varies by case, so
+        # JAX batches the whole carry; batched from the start, it does so in one round of its
+        # fixed point instead of one per part that becomes batched (`batched_like`).
+        init = batched_like(init, (term, solver, controller, t0, t1, dt0, ts))
+    if kind == "lax":
+        # Forward mode: the parts every step makes depend on the parameters carry tangents
+        # from the start, batched under jacfwd's vmap (`differentiated_like`).
+        y, solver_state, save_ys = differentiated_like(
+            (init.y, init.solver_state, init.save_ys), (term, solver, controller, y0)
+        )
+        init = init._replace(y=y, solver_state=solver_state, save_ys=save_ys)
     floor = clip_floor(t1)
 
     def cond(c):
