@@ -10,15 +10,17 @@ compile).
 
 Here the same computation is a module-level function (`jacobian`, `channels_batch`) of a
 `ModelSpec`, whose one static field is everything the trace depends on, written down
-(`describe`): the scene's class and options, each fitted parameter's name and bounds (not its
-guess: the trace does not depend on it), the values of the parameters that are not fitted
-(concrete numbers choose a scene's composition, `scenes.base.is_exactly_zero`, so they stay
-constants of the program, as in the closure), the channels, the step control with its
-tolerances replaced by data, and the options passed to `simulate`. `_program_cache.call`
-then keeps the traced program and its executable: a second process with the same description
-traces nothing. A scene defined outside jaxdeploy (whose code the cache's key does not cover)
-or a description that cannot be written down keeps its object's identity as its key: it is
-traced in each process, as before.
+(`describe`): the scene's class and options, each fitted parameter's name and scale (its bounds
+are data of the program, and the trace does not depend on its guess), the values of the
+parameters that are not fitted (concrete numbers choose a scene's composition,
+`scenes.base.is_exactly_zero`, so they stay constants of the program, as in the closure), the
+channels, the step control with its tolerances replaced by data, and the options passed to
+`simulate`. `_program_cache.call` then keeps the traced program and its executable: a second
+process with the same description traces nothing. A scene defined outside jaxdeploy (whose code
+the cache's key does not cover) or a description that cannot be written down keeps its object's
+identity as its key: it is traced in each process, as before. The bounds as data: a fit from
+another guess (whose default bounds, guess/10 … 10 × guess, move with it: `make_parameters`) or
+with other bounds runs the same program.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import equinox as eqx
 import numpy as np
 
 from .. import _program_cache
+from ._parameters import physical
 
 
 class _Described:
@@ -73,7 +76,8 @@ def describe(scene, parameters, base, names, control, simulate_options) -> str |
     record = {
         "scene": f"{cls.__module__}:{cls.__qualname__}",
         "scene_options": scene.options,
-        "parameters": [[p.name, p.low, p.high] for p in parameters],
+        # Bounds are data of the program (`call`): only whether each moves on a log scale.
+        "parameters": [[p.name, p.log_scale] for p in parameters],
         "fixed": {k: v for k, v in base.items() if k not in fitted},
         "names": list(names),
         "control": repr(control),
@@ -109,8 +113,9 @@ def spec(scene, parameters, base, names, structure, simulate_options) -> ModelSp
     return ModelSpec(_Described(value, description))
 
 
-def _evaluate(model: ModelSpec, z, ts, rtol, atol):
-    """`(channels, (channels, ok))` of the run at internal coordinates `z` (`FitParameter`)."""
+def _evaluate(model: ModelSpec, z, ts, rtol, atol, ends):
+    """`(channels, (channels, ok))` of the run at internal coordinates `z` (`FitParameter`;
+    `ends` (p, 2): each parameter's `FitParameter.ends`)."""
     import diffrax as dfx
 
     from ..batch import run_scene
@@ -124,7 +129,7 @@ def _evaluate(model: ModelSpec, z, ts, rtol, atol):
         )
     params = dict(base)
     for k, p in enumerate(parameters):
-        params[p.name] = p.to_physical(z[k])
+        params[p.name] = physical(z[k], ends[k, 0], ends[k, 1], p.log_scale)
     traj = run_scene(
         scene, params, ts[-1], ts=ts, control=control, adjoint=dfx.ForwardMode(), **options
     )
@@ -134,22 +139,24 @@ def _evaluate(model: ModelSpec, z, ts, rtol, atol):
 
 
 @eqx.filter_jit
-def jacobian(model: ModelSpec, rtol, atol, z, ts):
+def jacobian(model: ModelSpec, rtol, atol, ends, z, ts):
     """`(d channels/dz, (channels, ok))` at `z`: forward mode, one tangent per parameter."""
     import jax
 
-    return jax.jacfwd(lambda w: _evaluate(model, w, ts, rtol, atol), has_aux=True)(z)
+    return jax.jacfwd(lambda w: _evaluate(model, w, ts, rtol, atol, ends), has_aux=True)(z)
 
 
 @eqx.filter_jit
-def channels_batch(model: ModelSpec, rtol, atol, zs, ts):
+def channels_batch(model: ModelSpec, rtol, atol, ends, zs, ts):
     """`(channels, ok)` of many points `zs` (k, p) as one vmapped batch."""
     import jax
 
-    return jax.vmap(lambda z: _evaluate(model, z, ts, rtol, atol)[1])(zs)
+    return jax.vmap(lambda z: _evaluate(model, z, ts, rtol, atol, ends)[1])(zs)
 
 
 def call(function, model: ModelSpec, rtol, atol, z, ts):
-    """`function(model, rtol, atol, z, ts)` through the program cache (`_program_cache.call`:
-    a plain call when it is off or the model has no description)."""
-    return _program_cache.call(function, model, rtol, atol, np.asarray(z), np.asarray(ts))
+    """`function(model, rtol, atol, ends, z, ts)` through the program cache
+    (`_program_cache.call`: a plain call when it is off or the model has no description),
+    the fitted parameters' ends (`FitParameter.ends`) as data."""
+    ends = np.array([p.ends() for p in model.static.value[1]], dtype=float).reshape(-1, 2)
+    return _program_cache.call(function, model, rtol, atol, ends, np.asarray(z), np.asarray(ts))

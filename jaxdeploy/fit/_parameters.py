@@ -38,11 +38,14 @@ class FitParameter:
             return math.log(self.low), math.log(self.high)
         return self.low, self.high
 
+    def ends(self) -> tuple[float, float]:
+        """`(a, b)`: the bounds on the scale the parameter moves on (ln low, ln high for a
+        log-scale parameter, else low, high)."""
+        return self._ends()
+
     def to_physical(self, z):
         """θ(z) (works on JAX values)."""
-        a, b = self._ends()
-        u = a + (b - a) * (1.0 / (1.0 + jnp.exp(-z)))
-        return jnp.exp(u) if self.log_scale else u
+        return physical(z, *self._ends(), self.log_scale)
 
     def to_internal(self, value: float) -> float:
         """z(θ), the inverse of `to_physical`."""
@@ -57,6 +60,14 @@ class FitParameter:
         s = 1.0 / (1.0 + math.exp(-z))
         ds = (b - a) * s * (1.0 - s)
         return ds * float(self.to_physical(z)) if self.log_scale else ds
+
+
+def physical(z, a, b, log_scale: bool):
+    """θ(z) = exp(u) or u, u = a + (b − a) s(z) (module docstring), for ends `a`, `b` given
+    as numbers or as data of a compiled program (`fit._model_program`: one program for every
+    bound)."""
+    u = a + (b - a) * (1.0 / (1.0 + jnp.exp(-z)))
+    return jnp.exp(u) if log_scale else u
 
 
 def _number(text: str, what: str, spec: str) -> float:
