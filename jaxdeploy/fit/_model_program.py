@@ -90,20 +90,12 @@ def describe(scene, parameters, base, names, control, simulate_options) -> str |
 
 
 def tolerances(control):
-    """`(structure, rtol, atol)`: `control` with its tolerances as placeholders (the program's
-    structure; an automatic method resolved by the concrete rtol first) and the tolerances as
-    0-d arrays (0 where absent). A fixed-step control is its own structure."""
-    if not control.adaptive:
-        return control, np.zeros(()), np.zeros(())
-    has_rtol, has_atol = control.rtol is not None, control.atol is not None
-    structure = control.replace(
-        solver=control.resolved_solver(),
-        rtol=0.5 if has_rtol else None,
-        atol=1.0 if has_atol else None,
-    )
-    rtol = np.asarray(float(control.rtol) if has_rtol else 0.0)
-    atol = np.asarray(float(control.atol) if has_atol else 0.0)
-    return structure, rtol, atol
+    """`(structure, rtol, atol)` of `control` (`solvers.split_tolerances`), the tolerances as
+    0-d arrays: data of the model's programs."""
+    from ..solvers import split_tolerances
+
+    structure, rtol, atol = split_tolerances(control)
+    return structure, np.asarray(rtol), np.asarray(atol)
 
 
 def spec(scene, parameters, base, names, structure, simulate_options) -> ModelSpec:
@@ -119,14 +111,10 @@ def _evaluate(model: ModelSpec, z, ts, rtol, atol, ends):
     import diffrax as dfx
 
     from ..batch import run_scene
+    from ..solvers import with_tolerances
 
     scene, parameters, base, names, structure, options = model.static.value
-    control = structure
-    if structure.adaptive:
-        control = structure.replace(
-            rtol=None if structure.rtol is None else rtol,
-            atol=None if structure.atol is None else atol,
-        )
+    control = with_tolerances(structure, rtol, atol)
     params = dict(base)
     for k, p in enumerate(parameters):
         params[p.name] = physical(z[k], ends[k, 0], ends[k, 1], p.log_scale)

@@ -29,7 +29,9 @@ from .step_control import (
     StepControl,
     default_control,
     solver_advice,
+    split_tolerances,
     tolerances_as_data,
+    with_tolerances,
 )
 from .term import MechanismState, MechanismTerm
 
@@ -57,7 +59,9 @@ __all__ = [
     "state_norm",
     "step_maxima",
     "step_maximum",
+    "split_tolerances",
     "tolerances_as_data",
+    "with_tolerances",
     "stop_at_non_finite",
     "TrackExtremes",
     "TrackedState",

@@ -285,28 +285,54 @@ def tolerances_as_data(function: Callable) -> Callable:
     programs = {}
 
     def call(control: StepControl, *args):
-        if not control.adaptive:
-            key = (control, None, None)
-            if key not in programs:
-                programs[key] = jax.jit(lambda *a: function(control, *a))
-            return programs[key](*args)
-        structure = control.replace(solver=control.resolved_solver())
-        has_rtol, has_atol = control.rtol is not None, control.atol is not None
-        key = (structure.replace(rtol=0.5, atol=1.0), has_rtol, has_atol)
-        if key not in programs:
+        structure, rtol, atol = split_tolerances(control)
+        if structure not in programs:
+            if not structure.adaptive:  # a fixed-step control is closed over as it is
+                programs[structure] = jax.jit(lambda *a: function(structure, *a))
+            else:
 
-            def run(rtol, atol, *a, structure=structure, has_rtol=has_rtol, has_atol=has_atol):
-                traced = structure.replace(rtol=rtol if has_rtol else None,
-                                           atol=atol if has_atol else None)  # fmt: skip
-                return function(traced, *a)
+                def run(rtol, atol, *a, structure=structure):
+                    return function(with_tolerances(structure, rtol, atol), *a)
 
-            programs[key] = jax.jit(run)
-        rtol = float(control.rtol) if has_rtol else 0.0
-        atol = float(control.atol) if has_atol else 0.0
-        return programs[key](rtol, atol, *args)
+                programs[structure] = jax.jit(run)
+        if not structure.adaptive:
+            return programs[structure](*args)
+        return programs[structure](rtol, atol, *args)
 
     call.programs = programs
     return call
+
+
+def split_tolerances(control: StepControl) -> tuple[StepControl, float, float]:
+    """`(structure, rtol, atol)`: what a compiled program of `control` is made of (its
+    method, resolved by the concrete rtol when automatic, and every other setting, with
+    placeholders for the tolerances it has) and the tolerances as numbers (0 where absent),
+    its data (`tolerances_as_data`, the fit's model programs). A fixed-step control is its
+    own structure."""
+    if not control.adaptive:
+        return control, 0.0, 0.0
+    has_rtol, has_atol = control.rtol is not None, control.atol is not None
+    structure = control.replace(
+        solver=control.resolved_solver(),
+        rtol=0.5 if has_rtol else None,
+        atol=1.0 if has_atol else None,
+    )
+    return (
+        structure,
+        float(control.rtol) if has_rtol else 0.0,
+        float(control.atol) if has_atol else 0.0,
+    )
+
+
+def with_tolerances(structure: StepControl, rtol, atol) -> StepControl:
+    """The control of `structure` (`split_tolerances`) with its tolerances `rtol`, `atol`
+    (traced values inside a program)."""
+    if not structure.adaptive:
+        return structure
+    return structure.replace(
+        rtol=None if structure.rtol is None else rtol,
+        atol=None if structure.atol is None else atol,
+    )
 
 
 def as_step_control(control, base: StepControl | None = None) -> StepControl:
