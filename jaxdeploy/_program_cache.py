@@ -421,7 +421,7 @@ def _executable(cache_key, path, exported, arrays):
         # A kept executable is read back onto every device of the process: a one-device
         # program then fails with "Expected args to execute_sharded_on_local_devices to have
         # 4 shards" (jax 0.10.2, 4 forced host devices: the sweep's probe). Compiled, not kept.
-        compiled = _lowered(exported.call, arrays).compile()
+        compiled = _lowered(_placed_call(exported), arrays).compile()
         _compiled[cache_key] = compiled
         return compiled
     where = _executable_path(path)
@@ -440,6 +440,32 @@ def _executable(cache_key, path, exported, arrays):
         compiled = _Kept(compiled, where, exported, arrays)
     _compiled[cache_key] = compiled
     return compiled
+
+
+def _placed_call(exported):
+    """`exported.call`, placed on the devices it was exported for: a program of several
+    devices (`jax.shard_map`: `optimize.BatchObjective`) must be called with its arguments
+    laid out over as many ("exported for 2 devices and is called in a context with 1
+    devices", jax 0.10.2), the layout it was exported with (`Exported.in_shardings_jax`) on
+    the process's first devices, in order, as the traced program's mesh took them."""
+    import jax
+    import numpy as np
+
+    if exported.nr_devices == 1:
+        return exported.call
+    mesh = jax.sharding.Mesh(np.array(jax.devices()[: exported.nr_devices]), ("devices",))
+    # A layout the program left open (a `shard_map` inside a jit: the jit's own arguments
+    # and results have none) is whole on every device: it is the device count that counts.
+    whole = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+
+    def placed(shardings):
+        return [whole if s is None else s for s in shardings]
+
+    return jax.jit(
+        exported.call,
+        in_shardings=tuple(placed(exported.in_shardings_jax(mesh))),
+        out_shardings=placed(exported.out_shardings_jax(mesh)),  # `_export` returns a list
+    )
 
 
 def _lowered(fn, arrays):

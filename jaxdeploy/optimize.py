@@ -33,12 +33,14 @@ import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from functools import partial
 
 import diffrax as dfx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _design_program
 from .batch import run_scene, simulate_batch, step_control
 from .objectives import Deployment, Objective, ideal_lock_time
 from .scenes.base import Scene
@@ -182,9 +184,10 @@ class DesignProblem:
             )
         return {**self.fixed, **x}
 
-    def deployment(self, x: Mapping, trajectory=None, control=None):
+    def deployment(self, x: Mapping, trajectory=None, control=None, ideal=None):
         """`(Deployment, trajectory)` for design x (runs the simulation unless given, with
-        `control` if given, else the problem's; the ideal reference stays the problem's)."""
+        `control` if given, else the problem's; the ideal reference is the problem's, or
+        `ideal`: the same channels as arguments of a program, `_design_program`)."""
         params = self.params(x)
         if trajectory is None:
             options = {} if self.adjoint is None else {"adjoint": self.adjoint}
@@ -198,13 +201,14 @@ class DesignProblem:
             **self.scene.events(mechanism, trajectory),
             **self.scene.episode_outputs(mechanism, trajectory),
         }
-        return Deployment(self.ts, self.lock_time, channels, self.ideal, events), trajectory
+        ideal = self.ideal if ideal is None else ideal
+        return Deployment(self.ts, self.lock_time, channels, ideal, events), trajectory
 
-    def evaluate(self, x: Mapping, control=None):
+    def evaluate(self, x: Mapping, control=None, ideal=None):
         """`(J, parts, ok)`: the objective, each term's feature, and the run's success flag
         (traceable in x; the design run with `control` if given, a `StepControl` whose
-        tolerances may be traced: `optimize(..., control=...)`)."""
-        dep, trajectory = self.deployment(x, control=control)
+        tolerances may be traced: `optimize(..., control=...)`; `ideal` as in `deployment`)."""
+        dep, trajectory = self.deployment(x, control=control, ideal=ideal)
         ok = trajectory.result == dfx.RESULTS.successful
         return self.objective(dep), self.objective.parts(dep), ok
 
@@ -326,11 +330,21 @@ class BatchObjective:
     so that on a CPU split into one device per core (`jaxdeploy optimize`'s `--devices`) the
     shares run side by side. A batch that does not divide evenly is padded with copies of its
     last design, whose results are dropped. One device: a plain vmap. A vmapped case's last
-    bits depend on its batch, so a design's J can differ by round-off between device counts."""
+    bits depend on its batch, so a design's J can differ by round-off between device counts.
+
+    A `DesignProblem`'s program is a module-level one the program cache keeps
+    (`_design_program`, the ideal reference's channels its data): with the cache on, a second
+    process with the same problem and devices traces nothing. Another `problem` (anything
+    with `evaluate(x) -> (J, parts, ok)`) is traced in each process."""
 
     def __init__(self, problem: DesignProblem, devices=None):
         self.problem = problem
         self.devices = list(jax.devices() if devices is None else devices)
+        if type(problem) is DesignProblem:
+            # A module-level program the program cache keeps (`_design_program`); a subclass
+            # may evaluate otherwise than its description says: traced per instance below.
+            self._run = partial(_design_program.call, _design_program.spec(problem, self.devices))
+            return
         run = jax.vmap(problem.evaluate)
         if len(self.devices) > 1:
             mesh = jax.sharding.Mesh(np.array(self.devices), ("designs",))
@@ -343,9 +357,7 @@ class BatchObjective:
         size = len(next(iter(designs.values())))
         padded = -(-size // len(self.devices)) * len(self.devices)
         pad = padded - size
-        inputs = {
-            k: jnp.asarray(np.concatenate([v, np.repeat(v[-1:], pad)])) for k, v in designs.items()
-        }
+        inputs = {k: np.concatenate([v, np.repeat(v[-1:], pad)]) for k, v in designs.items()}
         values, parts, ok = self._run(inputs)
         parts = {k: np.asarray(v)[:size] for k, v in parts.items()}
         return np.asarray(values)[:size], parts, np.asarray(ok)[:size]
@@ -581,8 +593,6 @@ def _at_converged_tolerance(loss, box, x0, mode, control, fraction, progress):
     at the step control chosen by `fit.converged_tolerance` from `control` (at `x0`), or at
     `control` when `fraction` is None (`tolerance` then None); one compiled program for every
     tolerance tried and the optimisation."""
-    from functools import partial
-
     from .fit import converged_tolerance
     from .solvers import tolerances_as_data
 

@@ -24,6 +24,7 @@ FLOORS = {
     "_tracing": 0,
     "_xla_flags": 0,
     "_cores": 0,
+    "_described": 0,
     "contact": 1,
     "mechanism": 2,
     "solvers": 3,
@@ -36,6 +37,7 @@ FLOORS = {
     "fit": 7,
     "objectives": 7,
     "optimize": 7,
+    "_design_program": 7,
     "commands": 8,
     "cli": 8,
 }

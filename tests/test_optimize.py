@@ -440,3 +440,32 @@ def test_a_batch_of_designs_is_split_over_the_devices(devices):
     np.testing.assert_allclose(parts_a, a * a, rtol=1e-15)
     np.testing.assert_allclose(parts_b, np.sin(b), rtol=1e-15)
     assert ok == [True, False, True]
+
+
+def test_a_design_programs_key_is_its_problems_description():
+    """`BatchObjective`'s program (`_design_program`) is keyed by a description of its
+    problem: equal problems built apart share it (one trace per process, and the program
+    cache keeps it), another fixed value or objective weight makes another, and a scene class
+    defined outside jaxdeploy has none (compared by identity: traced per process)."""
+    from jaxdeploy import _design_program
+    from jaxdeploy.objectives import parse_objective
+    from jaxdeploy.optimize import DesignProblem
+
+    def spec(scene=None, objective="panel2:peak_vibration=1", **fixed):
+        problem = DesignProblem(
+            scene or DeployArray(), parse_objective(objective), 0.7, fixed=fixed,
+            ideal_scene=None, n_save=701,
+        )  # fmt: skip
+        return _design_program.spec(problem, jax.devices())
+
+    assert spec() == spec() and hash(spec()) == hash(spec())
+    assert "DesignBatch(" in repr(spec()) and " at 0x" not in repr(spec())
+    assert spec(panel1_ra=1e-6) != spec() and spec(panel1_ra=1e-6) == spec(panel1_ra=1e-6)
+    assert spec(objective="panel2:peak_vibration=2") != spec()
+
+    class OwnScene(DeployArray):
+        pass
+
+    own = spec(OwnScene())
+    assert own.static.description is None and own != spec(OwnScene()) and own == own
+    assert " at 0x" in repr(own)

@@ -8,6 +8,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 # The scripts' record of what JAX traced in their process: the names of the functions, from
@@ -228,3 +230,51 @@ def test_a_fits_model_is_traced_by_the_first_process_only(tmp_path):
     other = _fit_model(tmp_path, cache, "restitution=0.6:0.1:0.99")
     assert not [n for n in other["traced"] if n.startswith("exported_")], other["traced"]
     assert other["ok"] and other["bits"][0] != first["bits"][0]  # z = 0.3 is another value
+
+
+# A design problem's batch of designs (`optimize.BatchObjective`), split over two devices as
+# `jaxdeploy optimize` splits a 2-core CPU: the program `_design_program.evaluate_designs`.
+_DESIGN_BATCH_SCRIPT = (
+    _RECORD_TRACES
+    + """
+import json, sys
+monitoring.register_event_time_span_listener(record)
+
+import jaxdeploy as jd
+jd.enable_caches(sys.argv[1])
+import numpy as np
+from jaxdeploy.objectives import parse_objective
+from jaxdeploy.optimize import BatchObjective, DesignProblem
+
+objective = parse_objective(["panel1:lock_time=1", "panel2:first_onset_time=1"])
+problem = DesignProblem(jd.get_scene("deploy_array"), objective, 0.6, n_save=61)
+before = len(traced)  # the ideal reference's run came before
+batch = BatchObjective(problem)
+values, parts, ok = batch({"panel2_ra": np.array([0.8e-6, 1.6e-6, 3.2e-6])})
+print(json.dumps({"traced": traced[before:], "ok": ok.tolist(), "devices": len(batch.devices),
+                  "bits": [values.tobytes().hex()] + [parts[k].tobytes().hex() for k in parts]}))
+"""
+)
+
+
+@pytest.mark.slow  # ~1 CPU-min: a vmapped deploy_array program to 0.6 s traced and compiled
+def test_a_design_batch_is_traced_by_the_first_process_only(tmp_path):
+    """`BatchObjective` of a `DesignProblem` on two devices (`jax.shard_map`, three designs
+    padded to four): a second process with the same problem traces nothing of its program
+    and gives the first's objective and parts bit for bit."""
+    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
+    env["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
+    runs = []
+    for _ in range(2):
+        proc = subprocess.run(
+            [sys.executable, "-c", _DESIGN_BATCH_SCRIPT, str(tmp_path / "cache")],
+            env=env, capture_output=True, text=True, cwd=tmp_path,
+        )  # fmt: skip
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+    first, second = runs
+    assert "exported_evaluate_designs" in first["traced"], first["traced"]
+    assert not [n for n in second["traced"] if "evaluate" in n], second["traced"]
+    assert first["devices"] == second["devices"] == 2
+    assert first["ok"] == second["ok"] == [True, True, True]
+    assert second["bits"] == first["bits"]

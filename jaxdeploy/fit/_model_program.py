@@ -31,39 +31,14 @@ import equinox as eqx
 import numpy as np
 
 from .. import _program_cache
+from .._described import Described
 from ._parameters import physical
-
-
-class _Described:
-    """A static value compared, hashed and printed by its description (`describe`): equal
-    descriptions trace to the same program. Without one (None) the value is compared by
-    identity and printed with its address, which `_program_cache.key` refuses to keep."""
-
-    __slots__ = ("value", "description")
-
-    def __init__(self, value, description: str | None):
-        self.value, self.description = value, description
-
-    def __eq__(self, other):
-        if not isinstance(other, _Described):
-            return NotImplemented
-        if self.description is None or other.description is None:
-            return self is other
-        return self.description == other.description
-
-    def __hash__(self):
-        return hash(self.description) if self.description is not None else id(self)
-
-    def __repr__(self):
-        if self.description is None:
-            return object.__repr__(self)  # "<... at 0x...>": not kept by the program cache
-        return f"FitModel({self.description})"
 
 
 class ModelSpec(eqx.Module):
     """What the fit's model program is (`describe`), as the static part of its arguments."""
 
-    static: _Described = eqx.field(static=True)
+    static: Described = eqx.field(static=True)
 
 
 def describe(scene, parameters, base, names, control, simulate_options) -> str | None:
@@ -102,7 +77,7 @@ def spec(scene, parameters, base, names, structure, simulate_options) -> ModelSp
     """The `ModelSpec` of a fit's model at one step-control structure (`tolerances`)."""
     value = (scene, tuple(parameters), dict(base), tuple(names), structure, dict(simulate_options))
     description = describe(scene, parameters, base, names, structure, simulate_options)
-    return ModelSpec(_Described(value, description))
+    return ModelSpec(Described(value, description, "FitModel"))
 
 
 def _evaluate(model: ModelSpec, z, ts, rtol, atol, ends):
