@@ -353,7 +353,9 @@ def _call(fn, *args):
         return fn(*args)
     path = os.path.join(where, f"{cache_key}.jaxexport")
     arrays = [x for x in jax.tree.leaves(args) if _is_array(x)]
-    with _key_lock(cache_key):
+    # The trace runs every call through the store in `fn`'s body as part of it (their
+    # arguments are traced): `ahead_of_time` is this call's alone.
+    with _key_lock(cache_key), _thread_setting("ahead", False):
         entry = _entry(fn, args, cache_key, path)
     if entry is None:
         if ahead:

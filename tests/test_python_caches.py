@@ -278,3 +278,59 @@ def test_a_design_batch_is_traced_by_the_first_process_only(tmp_path):
     assert first["devices"] == second["devices"] == 2
     assert first["ok"] == second["ok"] == [True, True, True]
     assert second["bits"] == first["bits"]
+
+
+# `jaxdeploy fit` with the tolerance its own to choose (noise given): the Jacobian's program is
+# made in a second thread while the main thread runs the start point (`commands.fit`).
+_FIT_COMMAND_SCRIPT = """
+import json, sys, threading
+from jax import monitoring
+
+traced = []
+def record(event, start, end, **kwargs):
+    if event == "/jax/core/compile/jaxpr_trace_duration":
+        traced.append([kwargs.get("fun_name"), threading.current_thread().name])
+monitoring.register_event_time_span_listener(record)
+
+import numpy as np
+from jaxdeploy.cli import main
+from jaxdeploy.fit import synthesize
+from jaxdeploy.scenes import Impact
+
+scene = Impact(damping="lankarani_nikravesh")
+data = synthesize(scene, {"restitution": 0.7}, np.linspace(0.0, 6e-4, 61), ["journal_x"], seed=3)
+data.save("impact.csv")
+code = main(["fit", "impact.csv", "--scene", "impact", "--scene-option",
+             "damping=lankarani_nikravesh", "--params", "restitution=0.4:0.05:0.99",
+             "--out", sys.argv[1], "--quiet"])
+report = json.load(open(sys.argv[1] + "/fit.json"))
+print(json.dumps({"code": code, "traced": traced, "estimates": report["estimates"],
+                  "errors": report["standard_errors"], "rtol": report["step_control"]["rtol"]}))
+"""
+
+
+def _fit_command(tmp_path, out, cache):
+    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
+    env["JAXDEPLOY_CACHE_DIR"] = cache
+    proc = subprocess.run(
+        [sys.executable, "-c", _FIT_COMMAND_SCRIPT, out],
+        env=env, capture_output=True, text=True, cwd=tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow  # ~1 CPU-min: two fits from empty caches
+def test_the_fit_command_makes_its_jacobian_while_it_chooses_the_tolerance(tmp_path):
+    """`jaxdeploy fit` from an empty cache traces its Jacobian's program in its second
+    thread (`fit-model-ahead`), never in the main thread, at the structure of the tolerance
+    it then chooses; the fit is the one made without the caches (no thread), bit for bit."""
+    ahead = _fit_command(tmp_path, "ahead", str(tmp_path / "cache"))
+    assert ahead["code"] == 0
+    jacobians = [t for t in ahead["traced"] if "jacobian" in t[0]]
+    assert jacobians == [["exported_jacobian", "fit-model-ahead"]], ahead["traced"]
+    plain = _fit_command(tmp_path, "plain", "off")
+    assert plain["code"] == 0 and ["jacobian", "MainThread"] in plain["traced"]
+    assert not [t for t in plain["traced"] if t[1] != "MainThread"], plain["traced"]
+    assert ahead["rtol"] == plain["rtol"] < 1e-6  # the tolerance chosen, below the default
+    assert ahead["estimates"] == plain["estimates"] and ahead["errors"] == plain["errors"]

@@ -311,6 +311,24 @@ class Model:
             )
         return self._specs[structure], rtol, atol
 
+    def make_ready(self, z, control=None, on_traced=None) -> bool:
+        """Trace (or read back) and compile the Jacobian's program at `control` (default the
+        model's; only its structure matters, `_model_program.tolerances`) without running
+        it, so that the first `self(z, ...)` at any tolerance of that structure, in any
+        thread, runs it at once or waits for it (`_program_cache.ahead_of_time`): a caller
+        may do this in a second thread while it chooses the tolerance (`jaxdeploy fit`).
+        `on_traced()` is called once the program is traced and lowered (XLA's compile, which
+        leaves Python's GIL free, follows). **Returns:** whether it was made (False: the
+        program cache is off or the model cannot be kept; the first call traces it then)."""
+        from .. import _program_cache
+
+        try:
+            with _program_cache.ahead_of_time(), _program_cache.when_traced(on_traced):
+                self(z, control=control)
+        except _program_cache.ProgramReady as ready:
+            return ready.ready
+        return False  # not reached: `ahead_of_time` raises before anything runs
+
     def save_times(self, n: int | None = None) -> np.ndarray:
         """The first `n` save times, padded with the last of them to the compiled length."""
         n = self.ts.size if n is None else int(n)
@@ -600,22 +618,15 @@ def fit(
     **Returns:** a `FitResult`.
     """
     start = time.perf_counter()
-    base = scene.resolve_params(fixed or {})
-    params = make_parameters(scene, parameters, base)
-    for p in params:
-        scene.resolve_params({**base, p.name: p.guess})  # cross-checks at the guess
-    if residuals is None:
-        residuals = ResidualSpec()
-    specs = [residuals] if isinstance(residuals, ResidualSpec) else list(residuals)
+    if starts < 0:
+        raise ValueError(f"starts = {starts!r} is invalid: it must be ≥ 0")
+    compiled, params, base, specs, comparisons = _model(
+        scene, data, parameters, fixed, residuals, control, simulate_options
+    )
+    longest = max(comparisons, key=lambda c: c.n_save)
     z = internal_vector(params)
     history, stages, evaluations = [], [], 0
     model_initial = None
-    if starts < 0:
-        raise ValueError(f"starts = {starts!r} is invalid: it must be ≥ 0")
-    comparisons = [Comparison(data, spec) for spec in specs]
-    longest = max(comparisons, key=lambda c: c.n_save)
-    # One compiled model for every stage (`Model`); the stages' tolerances are its data.
-    compiled = Model(scene, params, base, longest.names, longest.ts, control, simulate_options)
     control = compiled.control
     recheck = model_error is not None and control.rtol is not None and longest.noise_known
     k = 0
@@ -737,6 +748,47 @@ def fit(
         control=control,
         **details,
     )
+
+
+def _model(scene, data, parameters, fixed, residuals, control, simulate_options):
+    """`(model, params, base, specs, comparisons)` of `fit`'s arguments: one compiled `Model`
+    for every residual stage (over the longest stage's save times; the stages' tolerances
+    are its data), the `FitParameter`s, every parameter's value, the stages and their
+    `Comparison`s."""
+    base = scene.resolve_params(fixed or {})
+    params = make_parameters(scene, parameters, base)
+    for p in params:
+        scene.resolve_params({**base, p.name: p.guess})  # cross-checks at the guess
+    if residuals is None:
+        residuals = ResidualSpec()
+    specs = [residuals] if isinstance(residuals, ResidualSpec) else list(residuals)
+    comparisons = [Comparison(data, spec) for spec in specs]
+    longest = max(comparisons, key=lambda c: c.n_save)
+    model = Model(scene, params, base, longest.names, longest.ts, control, simulate_options)
+    return model, params, base, specs, comparisons
+
+
+def prepare_fit(
+    scene,
+    data: Measurements,
+    parameters: Sequence,
+    *,
+    fixed: Mapping | None = None,
+    residuals=None,
+    control=None,
+    on_traced: Callable | None = None,
+    **simulate_options,
+) -> bool:
+    """Make the program `fit` with these arguments evaluates at every Levenberg–Marquardt
+    step (the channels' Jacobian) ready without running it: traced, kept by the program
+    cache and compiled (`Model.make_ready`). `control` need only have the structure of the
+    fit's (its method and settings; the tolerances are data): `first_tolerance` gives it
+    before `choose_tolerance` has chosen. For a second thread while the first chooses the
+    tolerance and the horizons (`jaxdeploy fit`); `on_traced()` is called once the program
+    is traced (XLA's compile follows, without Python's GIL). **Returns:** whether it was
+    made (False: the program cache is off, or the model cannot be kept)."""
+    model, params, *_ = _model(scene, data, parameters, fixed, residuals, control, simulate_options)
+    return model.make_ready(internal_vector(params), on_traced=on_traced)
 
 
 def _replace_stages(specs, comparisons, k, new, data, longest) -> None:

@@ -93,28 +93,38 @@ def model_difference(a: Mapping, b: Mapping, comparison) -> float:
     )
 
 
-def choose_tolerance(scene, params: Mapping, comparison, control=None):
-    """`(control, record)`: the step control whose model error at `params` is at most
-    `MODEL_ERROR` noise levels RMS (module docstring), and what was measured. `record` also
-    holds the start run's trajectory (`"trajectory"`, not JSON) for `impact_horizons`."""
+def first_tolerance(scene, comparison, control=None):
+    """The step control `choose_tolerance` starts from: rtol_0 (module docstring) and atol
+    scaled alike; `control` resolved (`batch.step_control`) when it has no rtol. Every
+    control the search goes on to (`tighter`) keeps its method, so the fit's programs made
+    for this one (`Model.make_ready`) serve the one chosen."""
     from ..batch import step_control
 
     base = step_control(scene, control)
-    ts, names = comparison.ts, comparison.names
-    if base.rtol is None:  # fixed steps (or atol alone): no relative tolerance to choose
-        y, traj = run_channels(scene, params, ts, names, base)
-        return base, {"chosen_rtol": None, "met": None, "steps": [],
-                      "note": "fixed step", "trajectory": traj}  # fmt: skip
+    if base.rtol is None:
+        return base
     scale = max(float(np.sqrt(np.mean(comparison.data_features[n] ** 2))) for n in comparison.names)
     noise = min(comparison.sigma.values())
     rtol0 = min(base.rtol, 1e-2 * noise / scale) if scale > 0 else base.rtol
     rtol0 = max(10.0 ** math.floor(math.log10(rtol0)), RTOL_FLOOR)
-    current = _scaled(base, rtol0 / base.rtol)
+    return _scaled(base, rtol0 / base.rtol)
+
+
+def choose_tolerance(scene, params: Mapping, comparison, control=None):
+    """`(control, record)`: the step control whose model error at `params` is at most
+    `MODEL_ERROR` noise levels RMS (module docstring), and what was measured. `record` also
+    holds the start run's trajectory (`"trajectory"`, not JSON) for `impact_horizons`."""
+    current = first_tolerance(scene, comparison, control)
+    ts, names = comparison.ts, comparison.names
+    if current.rtol is None:  # fixed steps (or atol alone): no relative tolerance to choose
+        y, traj = run_channels(scene, params, ts, names, current)
+        return current, {"chosen_rtol": None, "met": None, "steps": [],
+                         "note": "fixed step", "trajectory": traj}  # fmt: skip
     y, traj = run_channels(scene, params, ts, names, current)
     if y is None:
         raise RuntimeError(
-            f"the model cannot be simulated at the start point with rtol {rtol0:g}; change the "
-            "guess, the bounds or give --rtol"
+            f"the model cannot be simulated at the start point with rtol {current.rtol:g}; "
+            "change the guess, the bounds or give --rtol"
         )
     current, steps, met, (y, traj) = tighten(
         lambda c: run_channels(scene, params, ts, names, c), comparison, current, (y, traj)
