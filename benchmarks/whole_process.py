@@ -13,7 +13,8 @@ whole-process`): interpreter start, imports, build, compile or cache load, solve
   wall and CPU time from the end of `import jaxdeploy` to its first `simulate` result.
 * The README's `jaxdeploy fit` (slider_crank's clearance and restitution from
   `examples/slider_crank_slider_x.csv`) twice in new processes with one cache folder: the
-  second reads the model's programs the first kept (`fit_second_process`).
+  second reads the model's programs the first kept (`fit_second_process`); the README's
+  `jaxdeploy optimize` alike (`optimize_second_process`: the design batch's program).
 * `jaxdeploy sweep` of 16 deploy_array cases as it runs by default (its vmapped chunk sharded
   over one device per usable core) against each case alone and the vmapped chunk on one
   device, each with empty and then filled caches (`sweep_on_every_core`).
@@ -173,22 +174,45 @@ def fit_second_process(root: str = ".") -> dict:
     process's wall and CPU time and the fit's own wall time (`fit.json`'s `wall_time_s`: the
     fit and its refits, without start-up and files); the second process reads the model's
     programs (its channels' Jacobian) the first traced and kept
-    (`jaxdeploy/fit/_model_program.py`), and must find the same estimates."""
-    out = {"command": "jaxdeploy " + " ".join(FIT)}
+    (`jaxdeploy/fit/_model_program.py`), and must find the same estimates. The first makes
+    the Jacobian's program in a second thread while it chooses the tolerance
+    (`jaxdeploy/commands/fit.py`, `_ModelAhead`)."""
+    return _twice(FIT, "fit.json", lambda report: report["estimates"], root)
+
+
+# The README's optimize, as its tour runs it.
+OPTIMIZE = ("optimize", "--scene", "deploy_array", "--objective", "paper_reproducible",
+            "--steps", "3", "--pairs", "2", "--quiet")  # fmt: skip
+
+
+def optimize_second_process(root: str = ".") -> dict:
+    """The README's optimize (`OPTIMIZE`) twice in new processes sharing one cache folder,
+    as `fit_second_process`: the second reads the design batch's program
+    (`jaxdeploy/_design_program.py`) the first traced and kept, and must find the same
+    objective history."""
+    return _twice(OPTIMIZE, "result.json", lambda r: [h["objective"] for h in r["history"]], root)
+
+
+def _twice(command, result_file, result, root) -> dict:
+    """`jaxdeploy COMMAND` twice in new processes sharing one cache folder: each process's
+    wall and CPU time, the command's own `wall_time_s` (from `result_file`) and `result(report)`,
+    whether the two are identical and the second's wall time over the first's."""
+    out = {"command": "jaxdeploy " + " ".join(command)}
     with tempfile.TemporaryDirectory() as tmp:
         env = _environment(os.path.join(tmp, "cache"))
         for run in ("first", "second"):
             folder = os.path.join(tmp, run)
-            done = _run([sys.executable, "-m", "jaxdeploy.cli", *FIT, "--out", folder], env, root)
-            with open(os.path.join(folder, "fit.json"), encoding="utf-8") as f:
+            argv = [sys.executable, "-m", "jaxdeploy.cli", *command, "--out", folder]
+            done = _run(argv, env, root)
+            with open(os.path.join(folder, result_file), encoding="utf-8") as f:
                 report = json.load(f)
             out[run] = {
                 "wall_s": done["wall_s"],
                 "cpu_s": done["cpu_s"],
-                "fit_wall_s": report["wall_time_s"],
-                "estimates": report["estimates"],
+                "own_wall_s": report["wall_time_s"],
+                "result": result(report),
             }
-    out["identical"] = out["first"]["estimates"] == out["second"]["estimates"]
+    out["identical"] = out["first"]["result"] == out["second"]["result"]
     out["second_ratio"] = out["second"]["wall_s"] / out["first"]["wall_s"]
     return out
 
@@ -291,5 +315,6 @@ def measure(root: str = ".") -> dict:
         "start_up_imports": start_up_imports(),
         "python_script": python_script_second_process(),
         "fit": fit_second_process(root),
+        "optimize": optimize_second_process(root),
         "sweep": sweep_on_every_core(),
     }
