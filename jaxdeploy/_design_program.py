@@ -1,4 +1,5 @@
-"""A batch of designs' objective as a program the program cache keeps between processes.
+"""A batch of designs' objective, and a design's pathwise gradient, as programs the program
+cache keeps between processes.
 
 `BatchObjective` compiled `jax.vmap(problem.evaluate)` (split over the devices by
 `jax.shard_map`) as a closure over its `DesignProblem`: a closure cannot be a key of
@@ -19,6 +20,11 @@ description traces nothing. A problem that cannot be written down (a scene class
 jaxdeploy, a subclass of `DesignProblem`, another objective type, a value JSON cannot hold)
 keeps its identity as its key: it is traced in each process, as before (`BatchObjective`
 gives only a `DesignProblem` itself, not a subclass, to this module).
+
+`optimize`'s pathwise gradient of `DesignProblem.evaluate` (`optimize._design_gradient`) was
+likewise a closure (`solvers.tolerances_as_data`): its `gradient_spec` adds the box's bounds,
+the mode and the step control's structure to the problem's description (the tolerances are
+data, as before: one program for every tolerance the search tries).
 """
 
 from __future__ import annotations
@@ -78,6 +84,23 @@ def describe(problem, devices) -> str | None:
         return None
 
 
+def gradient_spec(problem, box, mode: str, structure) -> DesignSpec:
+    """The `DesignSpec` of `problem`'s pathwise gradient in the box `box` (`optimize.Box`) by
+    `mode` ("forward" or "reverse") at the step control `structure` (its tolerances
+    placeholders: `solvers.split_tolerances`)."""
+    problem_description = describe(problem, ())
+    description = None
+    if problem_description is not None:
+        record = {
+            "problem": json.loads(problem_description),
+            "bounds": {k: [repr(float(lo)), repr(float(hi))] for k, (lo, hi) in box.bounds.items()},
+            "mode": mode,
+            "structure": repr(structure),
+        }
+        description = json.dumps(record, sort_keys=True)
+    return DesignSpec(Described((problem, box, mode, structure), description, "DesignGradient"))
+
+
 def spec(problem, devices) -> DesignSpec:
     """The `DesignSpec` of `problem`'s designs run over `devices`."""
     value = (problem, tuple(devices))
@@ -105,10 +128,23 @@ def evaluate_designs(design: DesignSpec, designs, ideal):
     return run(designs, ideal)
 
 
+def _ideal(problem):
+    """The problem's ideal reference channels as arrays (data of its programs), or None."""
+    if problem.ideal is None:
+        return None
+    return {k: np.asarray(v) for k, v in problem.ideal.items()}
+
+
+def call_gradient(function, design: DesignSpec, rtol, atol, u):
+    """`function(design, rtol, atol, u, ideal)` (`optimize`'s pathwise gradient program)
+    through the program cache, the ideal reference as data."""
+    ideal = _ideal(design.static.value[0])
+    arrays = (np.asarray(rtol), np.asarray(atol), np.asarray(u))
+    return _program_cache.call(function, design, *arrays, ideal)
+
+
 def call(design: DesignSpec, designs):
     """`evaluate_designs` through the program cache (a plain call when it is off or the
     problem has no description), the ideal reference as data."""
-    problem = design.static.value[0]
-    ideal = None if problem.ideal is None else {k: np.asarray(v) for k, v in problem.ideal.items()}
     designs = {k: np.asarray(v) for k, v in designs.items()}
-    return _program_cache.call(evaluate_designs, design, designs, ideal)
+    return _program_cache.call(evaluate_designs, design, designs, _ideal(design.static.value[0]))

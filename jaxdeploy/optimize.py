@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from functools import partial
 
 import diffrax as dfx
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -596,12 +597,14 @@ def _at_converged_tolerance(loss, box, x0, mode, control, fraction, progress):
     from .fit import converged_tolerance
     from .solvers import tolerances_as_data
 
-    reduced = _reduced(loss, box)
+    program = _kept_gradient(loss, box, mode)
+    if program is None:
+        reduced = _reduced(loss, box)
 
-    def gradient_at(c, u):
-        return _value_and_grad(lambda v: reduced(v, c), mode)(u)
+        def gradient_at(c, u):
+            return _value_and_grad(lambda v: reduced(v, c), mode)(u)
 
-    program = tolerances_as_data(gradient_at)
+        program = tolerances_as_data(gradient_at)
     if fraction is None:
         return partial(program, control), None
     u0 = box.from_params(x0)
@@ -612,6 +615,40 @@ def _at_converged_tolerance(loss, box, x0, mode, control, fraction, progress):
 
     found = converged_tolerance(gradient, control, fraction=fraction, progress=progress)
     return partial(program, found.control), found
+
+
+def _kept_gradient(loss, box: Box, mode: str):
+    """`(control, u) ↦ ((J, (parts, ok)), ∂J/∂u)` as `_at_converged_tolerance`'s program, for
+    `loss` the `evaluate` of a `DesignProblem` (not a subclass): a module-level program
+    (`_design_gradient`) the program cache keeps (`_design_program.gradient_spec`); None for
+    another loss (a closure, traced in each process)."""
+    from .solvers import split_tolerances
+
+    problem = getattr(loss, "__self__", None)
+    if type(problem) is not DesignProblem or loss.__func__ is not DesignProblem.evaluate:
+        return None
+    specs = {}
+
+    def program(control, u):
+        structure, rtol, atol = split_tolerances(control)
+        if structure not in specs:
+            specs[structure] = _design_program.gradient_spec(problem, box, mode, structure)
+        return _design_program.call_gradient(_design_gradient, specs[structure], rtol, atol, u)
+
+    return program
+
+
+@eqx.filter_jit
+def _design_gradient(design, rtol, atol, u, ideal):
+    """`((J, (parts, ok)), ∂J/∂u)` of the design problem's J at x(u) (`_reduced`) by the
+    design's mode, the step control of its structure with tolerances `rtol`, `atol`, the
+    ideal reference's channels `ideal` (`_design_program.gradient_spec`)."""
+    from .solvers import with_tolerances
+
+    problem, box, mode, structure = design.static.value
+    control = with_tolerances(structure, rtol, atol)
+    reduced = _reduced(lambda x, c: problem.evaluate(x, c, ideal=ideal), box)
+    return _value_and_grad(lambda v: reduced(v, control), mode)(u)
 
 
 def _value_and_grad(reduced: Callable, mode: str) -> Callable:

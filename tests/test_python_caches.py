@@ -334,3 +334,52 @@ def test_the_fit_command_makes_its_jacobian_while_it_chooses_the_tolerance(tmp_p
     assert not [t for t in plain["traced"] if t[1] != "MainThread"], plain["traced"]
     assert ahead["rtol"] == plain["rtol"] < 1e-6  # the tolerance chosen, below the default
     assert ahead["estimates"] == plain["estimates"] and ahead["errors"] == plain["errors"]
+
+
+# `optimize`'s pathwise gradient of a `DesignProblem` (forward mode, the design runs with
+# `diffrax.ForwardMode`, as `jaxdeploy optimize --gradient pathwise` runs it): the program
+# `optimize._design_gradient`.
+_DESIGN_GRADIENT_SCRIPT = (
+    _RECORD_TRACES
+    + """
+import json, sys
+monitoring.register_event_time_span_listener(record)
+
+import jaxdeploy as jd
+jd.enable_caches(sys.argv[1])
+import diffrax as dfx
+from jaxdeploy.objectives import parse_objective
+from jaxdeploy.optimize import DesignProblem, optimize
+
+objective = parse_objective(["panel1:lock_time=1"])
+problem = DesignProblem(jd.get_scene("deploy_array"), objective, 0.6, n_save=61,
+                        adjoint=dfx.ForwardMode())
+before = len(traced)  # the ideal reference's run came before
+result = optimize(problem.evaluate, {"spring_stiffness": 1.5}, {"spring_stiffness": (1.0, 3.0)},
+                  steps=1, mode="forward", control=problem.step_control)
+print(json.dumps({"traced": traced[before:], "status": result.status,
+                  "objective": result.objective, "gradient": result.gradient}))
+"""
+)
+
+
+@pytest.mark.slow  # ~2 CPU-min: a forward-mode deploy_array program to 0.6 s traced and compiled
+def test_a_design_gradient_is_traced_by_the_first_process_only(tmp_path):
+    """`optimize`'s pathwise gradient of a `DesignProblem` is kept by the program cache: a
+    second process with the same problem, box and mode traces nothing of it and finds the
+    first's objective and gradient bit for bit."""
+    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
+    runs = []
+    for _ in range(2):
+        proc = subprocess.run(
+            [sys.executable, "-c", _DESIGN_GRADIENT_SCRIPT, str(tmp_path / "cache")],
+            env=env, capture_output=True, text=True, cwd=tmp_path,
+        )  # fmt: skip
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+    first, second = runs
+    assert "exported__design_gradient" in first["traced"], first["traced"]
+    assert not [n for n in second["traced"] if "design_gradient" in n], second["traced"]
+    assert first["status"] == second["status"] == "ok"
+    assert second["objective"] == first["objective"] and second["gradient"] == first["gradient"]
+    assert first["gradient"][0]["spring_stiffness"] < 0  # a stiffer spring locks sooner
