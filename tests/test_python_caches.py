@@ -257,22 +257,30 @@ print(json.dumps({"traced": traced[before:], "ok": ok.tolist(), "devices": len(b
 )
 
 
+def _twice(script, tmp_path, **env_changes):
+    """`script`'s last line of output (JSON) from two new processes sharing one cache folder
+    (its argument), with `env_changes` in their environment and the caches' variables unset."""
+    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
+    env.update(env_changes)
+    runs = []
+    for _ in range(2):
+        proc = subprocess.run(
+            [sys.executable, "-c", script, str(tmp_path / "cache")],
+            env=env, capture_output=True, text=True, cwd=tmp_path,
+        )  # fmt: skip
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+    return runs
+
+
 @pytest.mark.slow  # ~1 CPU-min: a vmapped deploy_array program to 0.6 s traced and compiled
 def test_a_design_batch_is_traced_by_the_first_process_only(tmp_path):
     """`BatchObjective` of a `DesignProblem` on two devices (`jax.shard_map`, three designs
     padded to four): a second process with the same problem traces nothing of its program
     and gives the first's objective and parts bit for bit."""
-    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
-    env["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
-    runs = []
-    for _ in range(2):
-        proc = subprocess.run(
-            [sys.executable, "-c", _DESIGN_BATCH_SCRIPT, str(tmp_path / "cache")],
-            env=env, capture_output=True, text=True, cwd=tmp_path,
-        )  # fmt: skip
-        assert proc.returncode == 0, proc.stderr[-3000:]
-        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
-    first, second = runs
+    first, second = _twice(
+        _DESIGN_BATCH_SCRIPT, tmp_path, XLA_FLAGS="--xla_force_host_platform_device_count=2"
+    )
     assert "exported_evaluate_designs" in first["traced"], first["traced"]
     assert not [n for n in second["traced"] if "evaluate" in n], second["traced"]
     assert first["devices"] == second["devices"] == 2
@@ -368,16 +376,7 @@ def test_a_design_gradient_is_traced_by_the_first_process_only(tmp_path):
     """`optimize`'s pathwise gradient of a `DesignProblem` is kept by the program cache: a
     second process with the same problem, box and mode traces nothing of it and finds the
     first's objective and gradient bit for bit."""
-    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
-    runs = []
-    for _ in range(2):
-        proc = subprocess.run(
-            [sys.executable, "-c", _DESIGN_GRADIENT_SCRIPT, str(tmp_path / "cache")],
-            env=env, capture_output=True, text=True, cwd=tmp_path,
-        )  # fmt: skip
-        assert proc.returncode == 0, proc.stderr[-3000:]
-        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
-    first, second = runs
+    first, second = _twice(_DESIGN_GRADIENT_SCRIPT, tmp_path)
     assert "exported__design_gradient" in first["traced"], first["traced"]
     assert not [n for n in second["traced"] if "design_gradient" in n], second["traced"]
     assert first["status"] == second["status"] == "ok"
