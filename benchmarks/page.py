@@ -675,9 +675,11 @@ def optimize_lines(optimize: dict) -> list[str]:
     )
     return [
         f"`{optimize['command']}` (the README's optimize) in two new processes sharing one "
-        "cache folder: the second reads the design batch's program (the objective of a batch "
-        "of designs, `jaxdeploy/_design_program.py`) from the program cache instead of "
-        f"tracing it; {same}.",
+        "cache folder: the first makes the design batch's runs program in a second thread "
+        "while it runs the ideal reference (`jaxdeploy/commands/optimize.py`), then the "
+        "objective of their outputs; the second reads both programs "
+        "(`jaxdeploy/_design_program.py`) from the program cache instead of tracing them; "
+        f"{same}.",
         "",
         *_twice_table(optimize, "the optimisation itself (`result.json` `wall_time_s`)"),
     ]

@@ -14,7 +14,7 @@ whole-process`): interpreter start, imports, build, compile or cache load, solve
 * The README's `jaxdeploy fit` (slider_crank's clearance and restitution from
   `examples/slider_crank_slider_x.csv`) twice in new processes with one cache folder: the
   second reads the model's programs the first kept (`fit_second_process`); the README's
-  `jaxdeploy optimize` alike (`optimize_second_process`: the design batch's program).
+  `jaxdeploy optimize` alike (`optimize_second_process`: the design batch's programs).
 * `jaxdeploy sweep` of 16 deploy_array cases as it runs by default (its vmapped chunk sharded
   over one device per usable core) against each case alone and the vmapped chunk on one
   device, each with empty and then filled caches (`sweep_on_every_core`).
@@ -187,7 +187,7 @@ OPTIMIZE = ("optimize", "--scene", "deploy_array", "--objective", "paper_reprodu
 
 def optimize_second_process(root: str = ".") -> dict:
     """The README's optimize (`OPTIMIZE`) twice in new processes sharing one cache folder,
-    as `fit_second_process`: the second reads the design batch's program
+    as `fit_second_process`: the second reads the design batch's programs
     (`jaxdeploy/_design_program.py`) the first traced and kept, and must find the same
     objective history."""
     return _twice(OPTIMIZE, "result.json", lambda r: [h["objective"] for h in r["history"]], root)

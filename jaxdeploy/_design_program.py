@@ -7,24 +7,33 @@ cache keeps between processes.
 traced it again — deploy_array's smoothed-gradient batch for 12 s, then lowered it for 2 s,
 of which only XLA's compile came from JAX's persistent cache.
 
-Here the same computation is a module-level function (`evaluate_designs`) of a `DesignSpec`,
-whose one static field (`_described.Described`) carries the problem with a description of
-everything the trace reads from it (`describe`): the scene's class and options, the objective's
-terms, the horizon and the number of saved states (the saved times are
-`linspace(0, t_end, n_save)`), every parameter value that is not a design variable (concrete
-numbers choose a scene's composition), the ideal lock time (it places the objective's windows,
-static index ranges), the step control, the adjoint and the number of devices. The ideal
-reference's channels are arguments (data) rather than constants of the program.
-`_program_cache.call` then keeps the traced program: a second process with the same
-description traces nothing. A problem that cannot be written down (a scene class outside
-jaxdeploy, a subclass of `DesignProblem`, another objective type, a value JSON cannot hold)
-keeps its identity as its key: it is traced in each process, as before (`BatchObjective`
-gives only a `DesignProblem` itself, not a subclass, to this module).
+Here the same computation is two module-level functions of `DesignSpec`s, whose one static
+field (`_described.Described`) carries what the trace reads with a description of it:
+
+* `run_designs`: the designs' runs (`optimize.DesignRuns`), vmapped, returning the channels
+  and event outputs the objective reads (`objective_reads`) and each run's success. Its
+  description (`describe_runs`): the scene's class and options, the horizon and the number
+  of saved states (the saved times are `linspace(0, t_end, n_save)`), every parameter value
+  that is not a design variable (concrete numbers choose a scene's composition), the step
+  control, the adjoint, the number of devices and the outputs returned.
+* `objective_of`: the objective of those outputs, vmapped. Its description: the objective's
+  terms, the saved times and the ideal lock time (it places the objective's windows, static
+  index ranges); the ideal reference's channels are arguments (data).
+
+Split in two, the runs' program (nearly all of the trace and the compile) needs no ideal
+reference, so `jaxdeploy optimize` makes it in a second thread while the reference runs
+(`optimize.prepare_batch`); the objective's is small (0.15 s of XLA's compile for the README's
+optimize). The split changes no bit (the README's optimize, one device and two).
+`_program_cache.call` keeps both: a second process with the same descriptions traces nothing.
+What cannot be written down (a scene class outside jaxdeploy, a subclass of `DesignProblem`,
+another objective type, a value JSON cannot hold) keeps its identity as its key: it is traced
+in each process, as before (`BatchObjective` gives only a `DesignProblem` itself, not a
+subclass, to this module).
 
 `optimize`'s pathwise gradient of `DesignProblem.evaluate` (`optimize._design_gradient`) was
 likewise a closure (`solvers.tolerances_as_data`): its `gradient_spec` adds the box's bounds,
-the mode and the step control's structure to the problem's description (the tolerances are
-data, as before: one program for every tolerance the search tries).
+the mode and the step control's structure to the problem's description (`describe`; the
+tolerances are data, as before: one program for every tolerance the search tries).
 """
 
 from __future__ import annotations
@@ -39,49 +48,75 @@ from ._described import Described
 
 
 class DesignSpec(eqx.Module):
-    """What the batch program evaluates (`describe`), as the static part of its arguments."""
+    """What a program evaluates (`describe`), as the static part of its arguments."""
 
     static: Described = eqx.field(static=True)
 
 
-def describe(problem, devices) -> str | None:
-    """The description that keys the program (module docstring), or None when it cannot be
-    written down exactly."""
-    from .objectives import Objective, Term
+def describe_runs(runs, devices) -> str | None:
+    """The description that keys the runs' program (`optimize.DesignRuns`: module
+    docstring), or None when it cannot be written down exactly."""
+    record = _runs_record(runs)
+    if record is None:
+        return None
+    record["devices"] = len(devices)
+    return _dumps(record)
 
-    scene = problem.scene
+
+def _runs_record(runs) -> dict | None:
+    scene = runs.scene
     cls = type(scene)
     if not cls.__module__.startswith("jaxdeploy."):
         return None
+    try:
+        fixed = {k: float(v) for k, v in runs.fixed.items() if np.ndim(v) == 0}
+    except TypeError:  # a traced value
+        return None
+    if len(fixed) != len(runs.fixed):
+        return None
+    ts = np.linspace(0.0, runs.t_end, len(runs.ts))
+    if not np.array_equal(ts, runs.ts):
+        return None
+    return {
+        "scene": f"{cls.__module__}:{cls.__qualname__}",
+        "scene_options": scene.options,
+        "t_end": repr(runs.t_end),
+        "n_save": len(runs.ts),
+        "fixed": {k: repr(v) for k, v in fixed.items()},
+        "control": repr(runs.control),
+        "adjoint": repr(runs.adjoint),
+    }
+
+
+def _objective_record(problem) -> dict | None:
+    from .objectives import Objective, Term
+
     objective = problem.objective
     if type(objective) is not Objective or any(type(t) is not Term for t in objective.terms):
         return None
-    try:
-        fixed = {k: float(v) for k, v in problem.fixed.items() if np.ndim(v) == 0}
-    except TypeError:  # a traced value
-        return None
-    if len(fixed) != len(problem.fixed):
-        return None
-    ts = np.linspace(0.0, problem.t_end, len(problem.ts))
-    if not np.array_equal(ts, problem.ts):
-        return None
-    record = {
-        "scene": f"{cls.__module__}:{cls.__qualname__}",
-        "scene_options": scene.options,
+    return {
         "objective": [[t.feature, t.panel, t.weight, t.options] for t in objective.terms],
         "t_end": repr(problem.t_end),
         "n_save": len(problem.ts),
-        "fixed": {k: repr(v) for k, v in fixed.items()},
         "lock_time": repr(float(problem.lock_time)),
-        "control": repr(problem.control),
-        "adjoint": repr(problem.adjoint),
         "ideal": problem.ideal is not None,
-        "devices": len(devices),
     }
+
+
+def _dumps(record) -> str | None:
     try:
         return json.dumps(record, sort_keys=True, allow_nan=True)
     except (TypeError, ValueError):
         return None
+
+
+def describe(problem, devices) -> str | None:
+    """The description of a whole design problem's evaluation (its runs' and its
+    objective's), or None when it cannot be written down exactly."""
+    runs, objective = _runs_record(problem.runs), _objective_record(problem)
+    if runs is None or objective is None:
+        return None
+    return _dumps({**runs, **objective, "devices": len(devices)})
 
 
 def gradient_spec(problem, box, mode: str, structure) -> DesignSpec:
@@ -101,31 +136,111 @@ def gradient_spec(problem, box, mode: str, structure) -> DesignSpec:
     return DesignSpec(Described((problem, box, mode, structure), description, "DesignGradient"))
 
 
-def spec(problem, devices) -> DesignSpec:
-    """The `DesignSpec` of `problem`'s designs run over `devices`."""
-    value = (problem, tuple(devices))
-    return DesignSpec(Described(value, describe(problem, devices), "DesignBatch"))
+def runs_spec(runs, devices, reads) -> DesignSpec:
+    """The `DesignSpec` of the designs' runs (`optimize.DesignRuns`) over `devices`, returning
+    the outputs `reads` (`objective_reads`; None: every output)."""
+    value = (runs, tuple(devices), reads)
+    description = describe_runs(runs, devices)
+    if description is not None:
+        record = json.loads(description)
+        record["reads"] = None if reads is None else [sorted(r) for r in reads]
+        description = _dumps(record)
+    return DesignSpec(Described(value, description, "DesignRuns"))
+
+
+class _Reading(dict):
+    """A mapping that holds every key, each a placeholder array of `shape`, and records the
+    keys read (`objective_reads`)."""
+
+    def __init__(self, shape):
+        super().__init__()
+        self.shape, self.read = shape, set()
+
+    def __contains__(self, name):
+        return True
+
+    def __getitem__(self, name):
+        import jax.numpy as jnp
+
+        self.read.add(name)
+        return jnp.zeros(self.shape)
+
+
+def objective_reads(objective, ts):
+    """`(channels, events)`: the names of the run outputs `objective` reads, found by
+    evaluating it abstractly (`jax.eval_shape`) on placeholders at the saved times `ts` with
+    the phase boundary at the start (which names a feature reads does not depend on it); None
+    when that evaluation fails (then the runs return every output, and the objective's own
+    trace reports the problem).
+
+    Why the runs return only these: an output nobody reads is left out of the compiled
+    program (XLA removes the computation, and the loop's state that only it needs), which a
+    program that returns it cannot do: deploy_array's batch returning every channel and event
+    took 1.75x the time of one returning what the paper's objective reads."""
+    import jax
+
+    from .objectives import Deployment
+
+    ts = np.asarray(ts)
+    channels, ideal, events = _Reading(ts.shape), _Reading(ts.shape), _Reading(())
+
+    def read_objective():
+        deployment = Deployment(ts, float(ts[0]), channels, ideal, events)
+        return objective(deployment), objective.parts(deployment)
+
+    try:
+        jax.eval_shape(read_objective)
+    except Exception:  # noqa: BLE001 - the objective's own trace raises it again, with the data
+        return None
+    return frozenset(channels.read | ideal.read), frozenset(events.read)
+
+
+def objective_spec(problem) -> DesignSpec:
+    """The `DesignSpec` of `problem`'s objective of its runs' outputs."""
+    record = _objective_record(problem)
+    description = None if record is None else _dumps(record)
+    return DesignSpec(Described(problem, description, "DesignObjective"))
 
 
 @eqx.filter_jit
-def evaluate_designs(design: DesignSpec, designs, ideal):
-    """`(J, parts, ok)` of each design in `designs` (`{name: (B,)}`), `ideal` the problem's
-    ideal reference channels (or None): one vmap, or one per device (`jax.shard_map`, the
-    designs split, the reference on each; B a multiple of the device count)."""
+def run_designs(design: DesignSpec, designs):
+    """`(channels, events, ok)` of each design in `designs` (`{name: (B,)}`): one vmap, or one
+    per device (`jax.shard_map`, the designs split; B a multiple of the device count)."""
+    import diffrax as dfx
     import jax
 
-    problem, devices = design.static.value
+    runs, devices, reads = design.static.value
 
-    def run(designs, ideal):
-        return jax.vmap(lambda x: problem.evaluate(x, ideal=ideal))(designs)
+    def run(designs):
+        def one(x):
+            channels, events, trajectory = runs.outputs(x)
+            if reads is not None:  # what the objective reads alone (`objective_reads`: why)
+                channels = {k: v for k, v in channels.items() if k in reads[0]}
+                events = {k: v for k, v in events.items() if k in reads[1]}
+            return channels, events, trajectory.result == dfx.RESULTS.successful
+
+        return jax.vmap(one)(designs)
 
     if len(devices) > 1:
         mesh = jax.sharding.Mesh(np.array(devices), ("designs",))
-        split, whole = jax.sharding.PartitionSpec("designs"), jax.sharding.PartitionSpec()
-        run = jax.shard_map(
-            run, mesh=mesh, in_specs=(split, whole), out_specs=split, check_vma=False
-        )
-    return run(designs, ideal)
+        split = jax.sharding.PartitionSpec("designs")
+        run = jax.shard_map(run, mesh=mesh, in_specs=split, out_specs=split, check_vma=False)
+    return run(designs)
+
+
+@eqx.filter_jit
+def objective_of(design: DesignSpec, channels, events, ideal):
+    """`(J, parts)` of each design's outputs (`run_designs`' channels and events, leading axis
+    the designs) against the ideal reference's channels `ideal` (or None): one vmap."""
+    import jax
+
+    problem = design.static.value
+
+    def one(channels, events):
+        deployment = problem.deployment_of(channels, events, ideal)
+        return problem.objective(deployment), problem.objective.parts(deployment)
+
+    return jax.vmap(one)(channels, events)
 
 
 def _ideal(problem):
@@ -143,8 +258,20 @@ def call_gradient(function, design: DesignSpec, rtol, atol, u):
     return _program_cache.call(function, design, *arrays, ideal)
 
 
-def call(design: DesignSpec, designs):
-    """`evaluate_designs` through the program cache (a plain call when it is off or the
-    problem has no description), the ideal reference as data."""
+def run(runs: DesignSpec, designs):
+    """`run_designs` through the program cache (a plain call when it is off or the runs have
+    no description), its outputs as NumPy arrays."""
+    import jax
+
     designs = {k: np.asarray(v) for k, v in designs.items()}
-    return _program_cache.call(evaluate_designs, design, designs, _ideal(design.static.value[0]))
+    outputs = _program_cache.call(run_designs, runs, designs)
+    return jax.tree.map(np.asarray, outputs)
+
+
+def call(runs: DesignSpec, objective: DesignSpec, designs):
+    """`(J, parts, ok)` of `designs`: their runs (`run`), then the objective of the runs'
+    outputs (`objective_of`, through the program cache, the ideal reference as data)."""
+    channels, events, ok = run(runs, designs)
+    problem = objective.static.value
+    values, parts = _program_cache.call(objective_of, objective, channels, events, _ideal(problem))
+    return values, parts, ok

@@ -112,6 +112,58 @@ class Box:
         return jnp.asarray(u, dtype=float)
 
 
+class DesignRuns:
+    """The runs of a design problem, without its objective: `scene` with parameters `fixed` ∪ x
+    over `n_save` equally spaced saved times to `t_end`, with `control` (a `StepControl`, or a
+    mapping of its fields overriding the scene's default) and `adjoint` (None: reverse mode
+    with checkpointing). `DesignProblem` evaluates its objective on these runs' outputs; made
+    alone (it needs no ideal reference), it lets the design batch's runs be compiled while the
+    reference runs (`prepare_batch`)."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        t_end: float,
+        *,
+        n_save: int = 1601,
+        fixed: Mapping | None = None,
+        control: StepControl | Mapping | None = None,
+        adjoint=None,
+    ):
+        self.scene, self.t_end, self.adjoint = scene, float(t_end), adjoint
+        self.fixed = scene.resolve_params(fixed)
+        self.control = control if isinstance(control, StepControl) else dict(control or {})
+        self.ts = np.linspace(0.0, self.t_end, n_save)
+
+    def params(self, x: Mapping) -> dict:
+        unknown = [k for k in x if k not in self.fixed]
+        if unknown:
+            raise ValueError(
+                f"unknown parameter {unknown[0]!r} for scene {self.scene.name!r}; valid: "
+                + ", ".join(sorted(self.fixed))
+            )
+        return {**self.fixed, **x}
+
+    def outputs(self, x: Mapping, trajectory=None, control=None):
+        """`(channels, events, trajectory)` of design x: the scene's channels at the saved
+        times and its event and episode outputs (`Scene.events`, `Scene.episode_outputs`),
+        from `trajectory` if given, else a run with `control` if given, else the runs'."""
+        params = self.params(x)
+        if trajectory is None:
+            options = {} if self.adjoint is None else {"adjoint": self.adjoint}
+            control = self.control if control is None else control
+            trajectory = run_scene(
+                self.scene, params, self.t_end, ts=self.ts, control=control, **options
+            )
+        mechanism = self.scene.build(params)
+        channels = self.scene.channels(mechanism, trajectory)
+        events = {
+            **self.scene.events(mechanism, trajectory),
+            **self.scene.episode_outputs(mechanism, trajectory),
+        }
+        return channels, events, trajectory
+
+
 class DesignProblem:
     """J(x) = objective(deployment of `scene` with parameters `fixed` ∪ x) for design parameters
     x (a dict of some of the scene's parameters).
@@ -125,6 +177,9 @@ class DesignProblem:
       mapping of its fields overriding each scene's default.
     - `adjoint`: a diffrax adjoint for derivatives (default reverse mode with checkpointing;
       `diffrax.ForwardMode()` for forward mode, cheaper for a few parameters).
+
+    The design runs are `self.runs` (`DesignRuns`, of the same arguments); the ideal
+    reference is run here, at construction.
     """
 
     def __init__(
@@ -140,13 +195,14 @@ class DesignProblem:
         lock_angle: float | None = None,
         adjoint=None,
     ):
-        self.scene, self.objective, self.t_end = scene, objective, float(t_end)
-        self.adjoint = adjoint
-        self.fixed = scene.resolve_params(fixed)
-        self.control = control if isinstance(control, StepControl) else dict(control or {})
+        self.runs = DesignRuns(
+            scene, t_end, n_save=n_save, fixed=fixed, control=control, adjoint=adjoint
+        )
+        self.scene, self.objective, self.t_end = scene, objective, self.runs.t_end
+        self.adjoint, self.fixed = adjoint, self.runs.fixed
+        self.control, self.ts = self.runs.control, self.runs.ts
         # The design runs' step control, resolved (what results record).
         self.step_control = step_control(scene, self.control)
-        self.ts = np.linspace(0.0, self.t_end, n_save)
         if ideal_scene == "auto":
             ideal_scene = type(scene)(ideal=True) if hasattr(scene, "ideal") else None
         self.ideal_scene = ideal_scene
@@ -177,33 +233,20 @@ class DesignProblem:
             raise ValueError(f"t_end = {self.t_end} s: the ideal mechanism does not lock by then")
 
     def params(self, x: Mapping) -> dict:
-        unknown = [k for k in x if k not in self.fixed]
-        if unknown:
-            raise ValueError(
-                f"unknown parameter {unknown[0]!r} for scene {self.scene.name!r}; valid: "
-                + ", ".join(sorted(self.fixed))
-            )
-        return {**self.fixed, **x}
+        return self.runs.params(x)
 
     def deployment(self, x: Mapping, trajectory=None, control=None, ideal=None):
         """`(Deployment, trajectory)` for design x (runs the simulation unless given, with
         `control` if given, else the problem's; the ideal reference is the problem's, or
         `ideal`: the same channels as arguments of a program, `_design_program`)."""
-        params = self.params(x)
-        if trajectory is None:
-            options = {} if self.adjoint is None else {"adjoint": self.adjoint}
-            control = self.control if control is None else control
-            trajectory = run_scene(
-                self.scene, params, self.t_end, ts=self.ts, control=control, **options
-            )
-        mechanism = self.scene.build(params)
-        channels = self.scene.channels(mechanism, trajectory)
-        events = {
-            **self.scene.events(mechanism, trajectory),
-            **self.scene.episode_outputs(mechanism, trajectory),
-        }
+        channels, events, trajectory = self.runs.outputs(x, trajectory, control)
+        return self.deployment_of(channels, events, ideal), trajectory
+
+    def deployment_of(self, channels, events, ideal=None) -> Deployment:
+        """The `Deployment` of a design run's outputs (`DesignRuns.outputs`) against the ideal
+        reference (the problem's, or `ideal`, as in `deployment`)."""
         ideal = self.ideal if ideal is None else ideal
-        return Deployment(self.ts, self.lock_time, channels, ideal, events), trajectory
+        return Deployment(self.ts, self.lock_time, channels, ideal, events)
 
     def evaluate(self, x: Mapping, control=None, ideal=None):
         """`(J, parts, ok)`: the objective, each term's feature, and the run's success flag
@@ -333,18 +376,23 @@ class BatchObjective:
     last design, whose results are dropped. One device: a plain vmap. A vmapped case's last
     bits depend on its batch, so a design's J can differ by round-off between device counts.
 
-    A `DesignProblem`'s program is a module-level one the program cache keeps
-    (`_design_program`, the ideal reference's channels its data): with the cache on, a second
-    process with the same problem and devices traces nothing. Another `problem` (anything
-    with `evaluate(x) -> (J, parts, ok)`) is traced in each process."""
+    A `DesignProblem`'s batch is two module-level programs the program cache keeps
+    (`_design_program`): the designs' runs (`problem.runs`), then the objective of their
+    outputs (the ideal reference's channels its data): with the cache on, a second process
+    with the same problem and devices traces nothing, and the runs' program can be made before
+    the ideal reference exists (`prepare_batch`). Another `problem` (anything with
+    `evaluate(x) -> (J, parts, ok)`) is traced in each process."""
 
     def __init__(self, problem: DesignProblem, devices=None):
         self.problem = problem
         self.devices = list(jax.devices() if devices is None else devices)
         if type(problem) is DesignProblem:
-            # A module-level program the program cache keeps (`_design_program`); a subclass
+            # Module-level programs the program cache keeps (`_design_program`); a subclass
             # may evaluate otherwise than its description says: traced per instance below.
-            self._run = partial(_design_program.call, _design_program.spec(problem, self.devices))
+            reads = _design_program.objective_reads(problem.objective, problem.ts)
+            runs = _design_program.runs_spec(problem.runs, self.devices, reads)
+            objective = _design_program.objective_spec(problem)
+            self._run = partial(_design_program.call, runs, objective)
             return
         run = jax.vmap(problem.evaluate)
         if len(self.devices) > 1:
@@ -356,12 +404,42 @@ class BatchObjective:
     def __call__(self, designs: Mapping) -> tuple[np.ndarray, dict, np.ndarray]:
         designs = {k: np.asarray(v, dtype=float) for k, v in designs.items()}
         size = len(next(iter(designs.values())))
-        padded = -(-size // len(self.devices)) * len(self.devices)
-        pad = padded - size
-        inputs = {k: np.concatenate([v, np.repeat(v[-1:], pad)]) for k, v in designs.items()}
+        inputs = _padded(designs, len(self.devices))
         values, parts, ok = self._run(inputs)
         parts = {k: np.asarray(v)[:size] for k, v in parts.items()}
         return np.asarray(values)[:size], parts, np.asarray(ok)[:size]
+
+
+def _padded(designs: Mapping, devices: int) -> dict:
+    """`designs` padded with copies of the last to a multiple of `devices` (`BatchObjective`)."""
+    size = len(next(iter(designs.values())))
+    pad = -(-size // devices) * devices - size
+    return {k: np.concatenate([v, np.repeat(v[-1:], pad)]) for k, v in designs.items()}
+
+
+def prepare_batch(
+    runs: DesignRuns, objective: Objective, names, size: int, devices=None, on_traced=None
+) -> bool:
+    """Make the program of `BatchObjective`'s runs ready without running it, for a batch of
+    `size` designs of the parameters `names` over `devices` (as `BatchObjective`'s), the
+    runs `runs` and `objective` those of the `DesignProblem` to come: traced, kept by
+    the program cache and compiled, so that the batch's first call runs it at once or waits
+    for it. It needs no ideal reference: a second thread can make it while `DesignProblem`
+    runs the reference (`jaxdeploy optimize`). `on_traced()` is called once it is traced
+    (XLA's compile, which leaves Python's GIL free, follows). **Returns:** whether it was
+    made (False: the program cache is off, or the runs cannot be described)."""
+    from . import _program_cache
+
+    devices = list(jax.devices() if devices is None else devices)
+    designs = _padded({name: np.zeros(size) for name in names}, len(devices))
+    reads = _design_program.objective_reads(objective, runs.ts)
+    spec = _design_program.runs_spec(runs, devices, reads)
+    try:
+        with _program_cache.ahead_of_time(), _program_cache.when_traced(on_traced):
+            _design_program.run(spec, designs)
+    except _program_cache.ProgramReady as ready:
+        return ready.ready
+    return False  # not reached: `ahead_of_time` raises before anything runs
 
 
 def expected_objective(batch: Callable, x: Mapping, scatter: Scatter, rng) -> dict:

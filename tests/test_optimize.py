@@ -442,30 +442,64 @@ def test_a_batch_of_designs_is_split_over_the_devices(devices):
     assert ok == [True, False, True]
 
 
-def test_a_design_programs_key_is_its_problems_description():
-    """`BatchObjective`'s program (`_design_program`) is keyed by a description of its
-    problem: equal problems built apart share it (one trace per process, and the program
-    cache keeps it), another fixed value or objective weight makes another, and a scene class
+def test_a_design_batchs_programs_are_keyed_by_descriptions():
+    """`BatchObjective`'s two programs (`_design_program`: the designs' runs, then their
+    objective) are keyed by descriptions: equal problems built apart share them (one trace
+    per process, and the program cache keeps them), another fixed value makes other runs, an
+    objective weight another objective but the same runs (the runs return what the
+    objective reads), an objective reading other outputs other runs, and a scene class
     defined outside jaxdeploy has none (compared by identity: traced per process)."""
     from jaxdeploy import _design_program
     from jaxdeploy.objectives import parse_objective
     from jaxdeploy.optimize import DesignProblem
 
-    def spec(scene=None, objective="panel2:peak_vibration=1", **fixed):
+    def specs(scene=None, objective="panel2:peak_vibration=1", **fixed):
         problem = DesignProblem(
             scene or DeployArray(), parse_objective(objective), 0.7, fixed=fixed,
             ideal_scene=None, n_save=701,
         )  # fmt: skip
-        return _design_program.spec(problem, jax.devices())
+        reads = _design_program.objective_reads(problem.objective, problem.ts)
+        runs = _design_program.runs_spec(problem.runs, jax.devices(), reads)
+        return runs, _design_program.objective_spec(problem)
 
-    assert spec() == spec() and hash(spec()) == hash(spec())
-    assert "DesignBatch(" in repr(spec()) and " at 0x" not in repr(spec())
-    assert spec(panel1_ra=1e-6) != spec() and spec(panel1_ra=1e-6) == spec(panel1_ra=1e-6)
-    assert spec(objective="panel2:peak_vibration=2") != spec()
+    assert specs() == specs() and hash(specs()) == hash(specs())
+    runs, objective = specs()
+    assert "DesignRuns(" in repr(runs) and " at 0x" not in repr(runs)
+    assert "DesignObjective(" in repr(objective) and " at 0x" not in repr(objective)
+    assert specs(panel1_ra=1e-6)[0] != runs and specs(panel1_ra=1e-6) == specs(panel1_ra=1e-6)
+    assert specs(panel1_ra=1e-6)[1] == objective  # the objective reads no parameter
+    weighted = specs(objective="panel2:peak_vibration=2")
+    assert weighted[0] == runs and weighted[1] != objective
+    assert specs(objective="panel1:peak_vibration=1")[0] != runs  # panel 1's channels
 
     class OwnScene(DeployArray):
         pass
 
-    own = spec(OwnScene())
-    assert own.static.description is None and own != spec(OwnScene()) and own == own
+    own, _ = specs(OwnScene())
+    assert own.static.description is None and own != specs(OwnScene())[0] and own == own
     assert " at 0x" in repr(own)
+
+
+def test_the_design_runs_return_what_the_objective_reads():
+    """`_design_program.objective_reads`: the channels and event outputs an objective reads
+    (the batch's runs return only these: XLA leaves out what nobody reads), found by
+    evaluating it on placeholders; None when that fails (then every output is returned, and
+    the objective's own trace reports the problem)."""
+    from jaxdeploy._design_program import objective_reads
+    from jaxdeploy.objectives import parse_objective
+
+    ts = np.linspace(0.0, 0.7, 701)
+    channels, events = objective_reads(parse_objective("paper_reproducible"), ts)
+    assert channels == {
+        "panel1_tip_x", "panel1_tip_y", "panel2_tip_x", "panel2_tip_y", "panel2_tip_ax",
+        "panel2_tip_ay",
+    }  # fmt: skip
+    assert events == set()
+    channels, events = objective_reads(
+        parse_objective(["panel1:lock_time=1", "panel2:max_contact_force=1"]), ts
+    )
+    assert channels == set() and events == {"lock_time", "panel2_peak_force"}
+    channels, _ = objective_reads(parse_objective("panel1:dominant_frequency=-1"), ts)
+    assert channels == {"panel1_tip_vx", "panel1_tip_vy"}  # interval means of the velocity
+    # Too short for two windows: the evaluation fails, every output is kept.
+    assert objective_reads(parse_objective("panel2:peak_vibration=1"), ts[:11]) is None

@@ -233,7 +233,8 @@ def test_a_fits_model_is_traced_by_the_first_process_only(tmp_path):
 
 
 # A design problem's batch of designs (`optimize.BatchObjective`), split over two devices as
-# `jaxdeploy optimize` splits a 2-core CPU: the program `_design_program.evaluate_designs`.
+# `jaxdeploy optimize` splits a 2-core CPU: the programs `_design_program.run_designs` (the
+# designs' runs) and `_design_program.objective_of` (their objective).
 _DESIGN_BATCH_SCRIPT = (
     _RECORD_TRACES
     + """
@@ -276,13 +277,14 @@ def _twice(script, tmp_path, **env_changes):
 @pytest.mark.slow  # ~1 CPU-min: a vmapped deploy_array program to 0.6 s traced and compiled
 def test_a_design_batch_is_traced_by_the_first_process_only(tmp_path):
     """`BatchObjective` of a `DesignProblem` on two devices (`jax.shard_map`, three designs
-    padded to four): a second process with the same problem traces nothing of its program
+    padded to four): a second process with the same problem traces nothing of its programs
     and gives the first's objective and parts bit for bit."""
     first, second = _twice(
         _DESIGN_BATCH_SCRIPT, tmp_path, XLA_FLAGS="--xla_force_host_platform_device_count=2"
     )
-    assert "exported_evaluate_designs" in first["traced"], first["traced"]
-    assert not [n for n in second["traced"] if "evaluate" in n], second["traced"]
+    assert "exported_run_designs" in first["traced"], first["traced"]
+    assert "exported_objective_of" in first["traced"], first["traced"]
+    assert not [n for n in second["traced"] if n.startswith("exported_")], second["traced"]
     assert first["devices"] == second["devices"] == 2
     assert first["ok"] == second["ok"] == [True, True, True]
     assert second["bits"] == first["bits"]
@@ -382,3 +384,54 @@ def test_a_design_gradient_is_traced_by_the_first_process_only(tmp_path):
     assert first["status"] == second["status"] == "ok"
     assert second["objective"] == first["objective"] and second["gradient"] == first["gradient"]
     assert first["gradient"][0]["spring_stiffness"] < 0  # a stiffer spring locks sooner
+
+
+# `jaxdeploy optimize` with a smoothed gradient: the design batch's runs are made in a second
+# thread while `DesignProblem` runs the ideal reference (`commands.optimize`).
+_OPTIMIZE_COMMAND_SCRIPT = """
+import json, sys, threading
+from jax import monitoring
+
+traced = []
+def record(event, start, end, **kwargs):
+    if event == "/jax/core/compile/jaxpr_trace_duration":
+        traced.append([kwargs.get("fun_name"), threading.current_thread().name])
+monitoring.register_event_time_span_listener(record)
+
+from jaxdeploy.cli import main
+
+code = main(["optimize", "--scene", "deploy_array", "--objective", "panel1:lock_time=1",
+             "--param", "panel1_ra", "--steps", "1", "--pairs", "1", "--t-end", "0.6",
+             "--n-save", "61", "--devices", "1", "--out", sys.argv[1], "--quiet"])
+report = json.load(open(sys.argv[1] + "/result.json"))
+print(json.dumps({"code": code, "traced": traced, "history": report["history"]}))
+"""
+
+
+def _optimize_command(tmp_path, out, cache):
+    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
+    env["JAXDEPLOY_CACHE_DIR"] = cache
+    proc = subprocess.run(
+        [sys.executable, "-c", _OPTIMIZE_COMMAND_SCRIPT, out],
+        env=env, capture_output=True, text=True, cwd=tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow  # ~2 CPU-min: two deploy_array optimisations from empty caches
+def test_the_optimize_command_makes_its_design_batch_while_the_reference_runs(tmp_path):
+    """`jaxdeploy optimize` (smoothed gradient) from an empty cache traces its design batch's
+    runs in its second thread (`optimize-batch-ahead`), never in the main thread, and the
+    objective of their outputs in the main thread (it needs the ideal lock time); the history
+    is the one made without the caches (no thread, `evaluate` traced whole), bit for bit."""
+    ahead = _optimize_command(tmp_path, "ahead", str(tmp_path / "cache"))
+    assert ahead["code"] == 0
+    runs = [t for t in ahead["traced"] if "run_designs" in t[0]]
+    assert runs == [["exported_run_designs", "optimize-batch-ahead"]], ahead["traced"]
+    assert ["exported_objective_of", "MainThread"] in ahead["traced"], ahead["traced"]
+    plain = _optimize_command(tmp_path, "plain", "off")
+    assert plain["code"] == 0
+    assert not [t for t in plain["traced"] if t[1] != "MainThread"], plain["traced"]
+    for a, p in zip(ahead["history"], plain["history"], strict=True):
+        assert a["objective"] == p["objective"] and a["gradient"] == p["gradient"]

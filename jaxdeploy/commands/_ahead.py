@@ -119,3 +119,33 @@ class CompileAhead:
         began = time.time()
         self._thread.join()
         return time.time() - began
+
+
+class Ahead:
+    """`make(on_traced)` in a daemon thread named `name`, for a program a command needs later
+    but can make now (`jaxdeploy fit`'s Jacobian, `jaxdeploy optimize`'s design batch): `make`
+    traces it inside `_program_cache.ahead_of_time()` and calls `on_traced()` once it is
+    traced (XLA's compile follows, without Python's GIL). The caller waits for the trace
+    (`wait_traced`) before it traces anything of its own (two traces take turns on the GIL:
+    `CompileAhead.wait_traced`), and joins the thread before the process ends (`join`: XLA
+    aborts a process that ends while it compiles). Errors stay in the thread: the program's
+    own call raises them again where they belong."""
+
+    def __init__(self, name: str, make):
+        self._traced = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(make,), name=name, daemon=True)
+        self._thread.start()
+
+    def _run(self, make) -> None:
+        try:
+            make(self._traced.set)
+        except Exception:  # noqa: BLE001 - the program's own call raises it again, in its thread
+            pass
+        finally:
+            self._traced.set()  # a caller of `wait_traced` never waits for more than this
+
+    def wait_traced(self) -> None:
+        self._traced.wait()
+
+    def join(self) -> None:
+        self._thread.join()

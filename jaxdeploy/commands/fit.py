@@ -377,7 +377,7 @@ class _Job:
 
     def __init__(self, **fields):
         self.schedule = {}
-        self.ahead = None  # the fit's program made in a second thread (`_ModelAhead`)
+        self.ahead = None  # the fit's program made in a second thread (`_model_ahead`)
         self.__dict__.update(fields)
 
     @property
@@ -451,7 +451,8 @@ def _schedule(args, job) -> None:
     full = Comparison(job.data, job.stages[-1])
     start = {**job.fixed, **{p.name: p.guess for p in job.params}}
     chooses = job.auto_tolerance and full.noise_known
-    job.ahead = _ModelAhead(job, first_tolerance(job.scene, full, job.control) if chooses else None)
+    first = first_tolerance(job.scene, full, job.control) if chooses else None
+    job.ahead = _model_ahead(job, first)
     job.ahead.wait_traced()
     if not args.quiet:
         print("measuring the model's error at the start point...", file=sys.stderr)
@@ -478,47 +479,27 @@ def _schedule(args, job) -> None:
         )
 
 
-class _ModelAhead:
-    """The fit's Jacobian program (`fit.prepare_fit`) made in a second thread while the main
-    thread measures the model's error at the start point (`_schedule`): from an empty cache
-    the Jacobian's trace and XLA compile (slider_crank over 4 ms, the README's fit: ~8 s and
-    ~11 s) were the fit's first step, after the schedule's runs (the start run's program,
-    ~5 s); now the schedule's runs happen while XLA compiles the Jacobian.
+def _model_ahead(job, control):
+    """The fit's Jacobian program (`fit.prepare_fit`) made in a second thread (`_ahead.Ahead`)
+    while the main thread measures the model's error at the start point (`_schedule`): from
+    an empty cache the Jacobian's trace and XLA compile (slider_crank over 4 ms, the README's
+    fit: ~8 s and ~11 s) were the fit's first step, after the schedule's runs (the start run's
+    program, ~5 s); now the schedule's runs happen while XLA compiles the Jacobian.
 
-    The main thread waits until the Jacobian is traced (`wait_traced`) before it traces its
-    own run: two traces would take turns on Python's GIL (why: `_ahead.CompileAhead`). The
-    program's structure is that of the tolerance the schedule starts from
-    (`fit.first_tolerance`; every tolerance it goes on to keeps the method). Errors stay in
-    the thread (the fit's own call raises them again); nothing is made when the program
-    cache is off. `control` None: the command's own control (no tolerance to choose)."""
+    The program's structure is that of the tolerance the schedule starts from
+    (`fit.first_tolerance`; every tolerance it goes on to keeps the method). Nothing is made
+    when the program cache is off. `control` None: the command's own control (no tolerance
+    to choose)."""
+    from ..fit import prepare_fit
+    from ._ahead import Ahead
 
-    def __init__(self, job, control):
-        import threading
+    control = job.control if control is None else control
 
-        self._traced = threading.Event()
-        self._thread = threading.Thread(
-            target=self._make, args=(job, job.control if control is None else control),
-            name="fit-model-ahead", daemon=True,
-        )  # fmt: skip
-        self._thread.start()
+    def make(on_traced):
+        prepare_fit(job.scene, job.data, job.params, fixed=job.fixed, residuals=job.stages,
+                    control=control, on_traced=on_traced)  # fmt: skip
 
-    def _make(self, job, control) -> None:
-        from ..fit import prepare_fit
-
-        try:
-            prepare_fit(job.scene, job.data, job.params, fixed=job.fixed, residuals=job.stages,
-                        control=control, on_traced=self._traced.set)  # fmt: skip
-        except Exception:  # noqa: BLE001 - the fit's own call raises it again, in its thread
-            pass
-        finally:
-            self._traced.set()
-
-    def wait_traced(self) -> None:
-        self._traced.wait()
-
-    def join(self) -> None:
-        """Wait for the thread (a process must not end while XLA compiles in it: it aborts)."""
-        self._thread.join()
+    return Ahead("fit-model-ahead", make)
 
 
 def _fit(args, job):

@@ -272,19 +272,80 @@ def _plan_run(args, scene, params, control) -> None:
 
 
 def _optimize(args, scene, objective, bounds, fixed, x0, control, folder, began) -> int:
-    import os
-    import time
-
+    """The optimisation's stages: the smoothing, the design batch's runs made ahead (a
+    second thread), then the problem (the ideal reference) and the optimisation itself."""
     import diffrax as dfx
 
+    from .. import _program_cache
     from ..fit import gradient_mode
-    from ..io import atomic_write_json, run_metadata
-    from ..optimize import BatchObjective, DesignProblem, Scatter, optimize
 
     pathwise = args.gradient == "pathwise" and not args.robust
     # Forward mode up to fit's parameter count (its runs use diffrax.ForwardMode, which
     # reverse mode cannot differentiate), reverse mode with checkpoints above.
     mode = gradient_mode(len(bounds))
+    smoothing = _smoothing(args, scene, bounds, scene.resolve_params(fixed), pathwise)
+    adjoint = dfx.ForwardMode() if pathwise and mode == "forward" else None
+    ahead = None
+    if smoothing is not None and _program_cache.folder() is not None:
+        ahead = _batch_ahead(scene, objective, args, fixed, control, smoothing, bounds)
+        ahead.wait_traced()
+    try:
+        return _optimize_problem(args, scene, objective, bounds, fixed, x0, control, folder,
+                                 began, smoothing, adjoint, mode)  # fmt: skip
+    finally:
+        if ahead is not None:
+            ahead.join()
+
+
+def _smoothing(args, scene, bounds, params, pathwise):
+    """The `Scatter` of the smoothed (or, `--robust`, the tolerance-averaged) objective, or
+    None for a pathwise gradient; `params` the resolved scene parameters."""
+    from ..optimize import Scatter
+
+    if args.robust:
+        ra = {n: args.tol_ra for n in scene.params if n.endswith("_ra")}
+        cl = {n: args.tol_clearance for n in scene.params if n.endswith("_clearance")}
+        nominal = {n: params[n] for n in (*ra, *cl) if n not in bounds}
+        return Scatter(ra, cl, pairs=args.pairs, seed=args.seed, nominal=nominal)
+    if pathwise:
+        return None
+    return Scatter(
+        relative={n: args.smoothing for n, (lo, _) in bounds.items() if lo > 0},
+        absolute={n: args.smoothing * (hi - lo) for n, (lo, hi) in bounds.items() if lo <= 0},
+        pairs=args.pairs,
+        seed=args.seed,
+    )
+
+
+def _batch_ahead(scene, objective, args, fixed, control, smoothing, bounds):
+    """The design batch's runs program (`optimize.prepare_batch`) made in a second thread
+    (`_ahead.Ahead`) while `DesignProblem` runs the ideal reference, whose lock time the
+    objective needs but the runs do not: from an empty cache (the README's optimize,
+    deploy_array) the reference's assembly, trace and compile (~5 s) came before the batch's
+    trace (~5 s) and XLA compile (~7 s); now the reference runs while XLA compiles the batch.
+    Only with the program cache on: a plain `jit` call could not find the program again."""
+    from ..optimize import DesignRuns, prepare_batch
+    from ._ahead import Ahead
+
+    runs = DesignRuns(scene, args.t_end, n_save=args.n_save, fixed=fixed, control=control)
+    names = [*smoothing.nominal, *bounds]  # the designs' parameters (`Scatter.antithetic`)
+
+    def make(on_traced):
+        prepare_batch(runs, objective, names, 2 * smoothing.pairs, on_traced=on_traced)
+
+    return Ahead("optimize-batch-ahead", make)
+
+
+def _optimize_problem(
+    args, scene, objective, bounds, fixed, x0, control, folder, began, smoothing, adjoint, mode
+) -> int:
+    import os
+    import time
+
+    from ..io import atomic_write_json, run_metadata
+    from ..optimize import BatchObjective, DesignProblem, optimize
+
+    pathwise = smoothing is None
     try:
         problem = DesignProblem(
             scene,
@@ -293,24 +354,11 @@ def _optimize(args, scene, objective, bounds, fixed, x0, control, folder, began)
             n_save=args.n_save,
             fixed=fixed,
             control=control,
-            adjoint=dfx.ForwardMode() if pathwise and mode == "forward" else None,
+            adjoint=adjoint,
         )
     except (RuntimeError, ValueError) as err:  # the ideal reference failed or did not lock
         print(f"error: {err}", file=sys.stderr)
         return 1
-    smoothing = None
-    if args.robust:
-        ra = {n: args.tol_ra for n in scene.params if n.endswith("_ra")}
-        cl = {n: args.tol_clearance for n in scene.params if n.endswith("_clearance")}
-        nominal = {n: problem.fixed[n] for n in (*ra, *cl) if n not in bounds}
-        smoothing = Scatter(ra, cl, pairs=args.pairs, seed=args.seed, nominal=nominal)
-    elif not pathwise:
-        smoothing = Scatter(
-            relative={n: args.smoothing for n, (lo, _) in bounds.items() if lo > 0},
-            absolute={n: args.smoothing * (hi - lo) for n, (lo, hi) in bounds.items() if lo <= 0},
-            pairs=args.pairs,
-            seed=args.seed,
-        )
     loss = problem.evaluate if smoothing is None else BatchObjective(problem)
 
     def progress(i, result):
