@@ -790,9 +790,9 @@ def whole_process_section(w: dict) -> list[str]:
             "--devices 1`, the vmap on one device (`--devices N` chooses the count). Each "
             "twice in new processes (empty caches, then the caches the first filled). The "
             "chunk's wall time is from the sweep's manifest; the rest of the process is "
-            "start-up, the run-length probe (which makes the chunk's programs: a sharded "
-            "sweep's are not kept in the program cache, so its second process traces them "
-            "again) and the files.",
+            "start-up, the run-length probe (which makes the chunk's programs, kept in the "
+            "program cache: `jaxdeploy/sweep.py`'s `_chunk_program`, so that a second process "
+            "traces none of them) and the files.",
             "",
             "| configuration | policy | devices | run | whole process wall [s] | CPU [s] "
             "| the chunk [s] |",

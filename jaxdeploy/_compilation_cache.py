@@ -149,8 +149,9 @@ def enable_caches(path: str | os.PathLike | None = None) -> str | None:
     mechanism has the composition, array shapes and settings of an earlier one, in this or
     any later process, reads its program back instead of tracing it (as does a fit's model,
     its channels and their Jacobian, for the same scene, fitted parameters, fixed values and
-    step control: `jaxdeploy.fit._model_program`; and a design problem's batch objective and
-    pathwise gradient: `jaxdeploy._design_program`) (the program cache,
+    step control: `jaxdeploy.fit._model_program`; a design problem's batch objective and
+    pathwise gradient: `jaxdeploy._design_program`; and a sweep's vmapped chunk without
+    features: `jaxdeploy.sweep._chunk_program`) (the program cache,
     `jax.export`: see `jaxdeploy/_program_cache.py` for what its key holds), and XLA loads
     the compiled program from JAX's persistent compilation cache instead of compiling it.
     Results are bit for bit those of an uncached run; new parameter values reuse the

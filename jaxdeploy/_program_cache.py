@@ -460,13 +460,21 @@ def _placed_call(exported):
     # and results have none) is whole on every device: it is the device count that counts.
     whole = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
 
-    def placed(shardings):
+    def placed(layouts, count):
+        try:
+            shardings = layouts(mesh)
+        except ValueError:
+            # Named layouts over another mesh: a program whose `shard_map` sits inside an inner
+            # `jax.jit` (the sweep's chunk, `sweep._chunk_program`) records its open layouts
+            # over a mesh without axes, which jax 0.10.2 refuses to move onto this one ("does
+            # not match the mesh used for export"). Whole on every device, as open layouts are.
+            shardings = [None] * count
         return [whole if s is None else s for s in shardings]
 
     return jax.jit(
         exported.call,
-        in_shardings=tuple(placed(exported.in_shardings_jax(mesh))),
-        out_shardings=placed(exported.out_shardings_jax(mesh)),  # `_export` returns a list
+        in_shardings=tuple(placed(exported.in_shardings_jax, len(exported.in_avals))),
+        out_shardings=placed(exported.out_shardings_jax, len(exported.out_avals)),
     )
 
 

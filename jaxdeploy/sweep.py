@@ -40,11 +40,13 @@ import time
 from collections.abc import Callable, Mapping
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ._cores import usable_cores
+from ._described import Described
 from ._validation import check_positive
 from .batch import batch_function, stack_cases, step_control
 from .io import (
@@ -68,16 +70,19 @@ DEFAULT_POLICY = "auto"
 DEFAULT_CHUNK_SIZE = 64
 # Why `each` for a few cases: a vmapped program is another compile than the single run of
 # `jaxdeploy simulate` and `jaxdeploy.simulate` (slider_crank: 13.5 s against 8.4 s,
-# docs/performance.md), and a sharded one is never kept in the program cache, so every sweep
-# process traces it again; cases run alone reuse the single run's kept programs and run as
-# threads on every core. Why only a few: small dense linear algebra costs per operation, so a
-# vmap's lanes share most of a step's cost, and each case alone pays its own dispatch (scene
-# build, assembly and the run's arguments in Python). Measured on 2 cores, whole processes,
-# with empty caches and then the caches the first filled (`jaxdeploy sweep`, deploy_array to
-# 0.6 s over spring stiffness; slider_crank after two `jaxdeploy simulate` runs of it):
-#   slider_crank, 3 cases   each 12.7 s, again 4.2 s     vmapped on 2 devices 20.0 s
-#   deploy_array, 4 cases   each 54.6 s, again 20.9 s    vmapped 52.4 s, again 28.7 s
-#   deploy_array, 16 cases  each 100.9 s, again 58.6 s   vmapped 60.2 s, again 33.5 s
+# docs/performance.md), which cases run alone reuse (its programs kept in the program cache),
+# running as threads on every core. Why only a few: small dense linear algebra costs per
+# operation, so a vmap's lanes share most of a step's cost, and each case alone pays its own
+# dispatch (scene build, assembly and the run's arguments in Python). The vmapped chunk's
+# program is kept in the program cache too (`_chunk_program`). Measured on 2 cores (Xeon,
+# AVX-512), whole processes, with empty caches and then the caches the first filled
+# (`jaxdeploy sweep`, deploy_array to 0.6 s over spring stiffness; slider_crank after two
+# `jaxdeploy simulate` runs of it, as the README's tour runs it):
+#   slider_crank, 3 cases   each 7.5 s                   vmapped on 2 devices 12.5 s
+#   deploy_array, 4 cases   each 42.5 s, again 15.3 s    vmapped 40.8 s, again 9.7 s
+#   deploy_array, 16 cases  each 82.4 s, again 46.7 s    vmapped 51.6 s, again 16.6 s
+# (So for deploy_array the vmap is now the faster at 4 cases too; `auto` still runs them one
+# by one: the threshold counts cases, not what a case costs.)
 AUTO_EACH_CASES_PER_CORE = 2
 
 
@@ -204,6 +209,86 @@ def _each_function(
                 f"the cases of this sweep run mechanisms of different compositions ({err}), "
                 "which policy 'each' cannot stack; use policy 'all'"
             ) from None
+
+    return run
+
+
+class _ChunkSpec(eqx.Module):
+    """What a sweep's chunk program runs (`_describe_chunk`), as the static part of its
+    arguments (`_chunk_program`)."""
+
+    static: Described = eqx.field(static=True)
+
+
+def _describe_chunk(scene, varied, shared, control, sharding, options) -> str | None:
+    """The description that keys a chunk's program (`_kept_batch_function`): the scene's
+    class and options, the varied parameters' names, every other parameter's value
+    (concrete numbers choose a scene's composition), the step control, the devices the
+    chunk is split over and `batch_function`'s other options; None when it cannot be
+    written down exactly (a scene class outside jaxdeploy, a value that is not a number,
+    several processes)."""
+    import json
+
+    cls = type(scene)
+    if jax.process_count() > 1 or not cls.__module__.startswith("jaxdeploy."):
+        return None
+    try:
+        values = {k: repr(float(v)) for k, v in shared.items() if np.ndim(v) == 0}
+    except TypeError:  # a traced value
+        return None
+    if len(values) != len(shared):
+        return None
+    record = {
+        "scene": f"{cls.__module__}:{cls.__qualname__}",
+        "scene_options": scene.options,
+        "varied": list(varied),
+        "shared": values,
+        "control": repr(control),
+        "devices": None if sharding is None else int(sharding.mesh.devices.size),
+        "options": {k: repr(v) for k, v in sorted(options.items())},
+    }
+    try:
+        return json.dumps(record, sort_keys=True, allow_nan=True)
+    except (TypeError, ValueError):
+        return None
+
+
+@eqx.filter_jit
+def _chunk_program(spec: _ChunkSpec, values, horizon, times):
+    """`batch.batch_function`'s program of the chunk `spec` describes, without features, as a
+    module-level function the program cache keeps (`_kept_batch_function`)."""
+    scene, varied, shared, control, sharding, options = spec.static.value
+    run = batch_function(scene, varied, shared, horizon, times, control=control,
+                         evaluate=_wrap(None), sharding=sharding, **options)  # fmt: skip
+    return run(values, horizon, times)
+
+
+def _kept_batch_function(
+    scene, varied, shared, t_end, ts, *, control, evaluate, sharding, **options
+):
+    """`batch.batch_function` (the same call and results) whose program the program cache
+    keeps, so that a second sweep process of the same definition traces nothing: its program
+    is `_chunk_program`, keyed by `_describe_chunk`. Only for a sweep without features
+    (`evaluate` None: a function cannot be written down) and with the program cache on;
+    otherwise `batch_function` itself, traced in each process. The chunk's values are passed
+    as host arrays: the kept program lays them out over the devices it was made for."""
+    from . import _program_cache
+
+    plain = batch_function(scene, varied, shared, t_end, ts, control=control,
+                           evaluate=_wrap(evaluate), sharding=sharding, **options)  # fmt: skip
+    description = None
+    if evaluate is None and _program_cache.folder() is not None:
+        description = _describe_chunk(scene, varied, shared, control, sharding, options)
+    if description is None:
+        return plain
+    value = (scene, tuple(varied), dict(shared), control, sharding, dict(options))
+    spec = _ChunkSpec(Described(value, description, "SweepChunk"))
+    default_t_end, default_ts = float(t_end), np.asarray(ts, dtype=float)
+
+    def run(values, t_end=default_t_end, ts=default_ts):
+        values = tuple(np.asarray(v, dtype=float) for v in values)
+        horizon, times = np.asarray(t_end, dtype=float), np.asarray(ts, dtype=float)
+        return _program_cache.call(_chunk_program, spec, values, horizon, times)
 
     return run
 
@@ -347,7 +432,8 @@ def sweep(
     setup.definition["summary"] = summarize is not None
     manifest = _open_manifest(out_dir, setup, resume, seed)
     todo = _chunks_to_run(out_dir, manifest, setup)
-    runner = _each_function if setup.policy["kind"] == "each" else batch_function
+    each = setup.policy["kind"] == "each"
+    runner = _each_function if each else _kept_batch_function
     run = runner(
         scene,
         setup.varied,
@@ -355,7 +441,7 @@ def sweep(
         setup.t_end,
         setup.ts,
         control=setup.control,
-        evaluate=_wrap(evaluate),
+        evaluate=_wrap(evaluate) if each else evaluate,
         sharding=setup.sharding,
         energy_meter=energy_meter,
         **_policy_options(setup.policy),

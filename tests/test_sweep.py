@@ -360,3 +360,50 @@ def test_a_sharded_deploy_array_sweep_finishes(tmp_path):
     manifest = json.loads((out / "manifest.json").read_text())
     assert len(manifest["devices"]) == 2
     assert sorted(load_sweep(str(out))["case"]) == [0, 1, 2, 3]  # every case, once
+
+
+# A sweep run from Python as the command line runs it, recording what JAX traced (its compile
+# events' function names) and the sweep's exit code.
+_TRACED_SWEEP = """
+import json, sys
+from jax import monitoring
+
+traced = []
+def record(event, start, end, **kwargs):
+    if event == "/jax/core/compile/jaxpr_trace_duration":
+        traced.append(kwargs.get("fun_name"))
+monitoring.register_event_time_span_listener(record)
+
+from jaxdeploy.cli import main
+code = main(sys.argv[1:])
+print(json.dumps({"code": code, "traced": traced}))
+"""
+
+
+@pytest.mark.slow  # ~1 CPU-min: three sweep processes on four forced devices
+def test_a_sharded_sweeps_program_is_traced_by_the_first_process_only(tmp_path):
+    """The vmapped chunk program, sharded over four devices, is kept by the program cache
+    (`sweep._chunk_program`): a second process with the same definition traces nothing of
+    it; both write the chunks a process without the caches (`batch_function` traced in it)
+    writes, bit for bit."""
+
+    def run(name, cache):
+        env = _env(tmp_path / "jax")
+        env["JAXDEPLOY_CACHE_DIR"] = cache
+        argv = _command(tmp_path / name)[3:]  # what follows `python -m jaxdeploy.cli`
+        done = subprocess.run([sys.executable, "-c", _TRACED_SWEEP, *argv], env=env,
+                              capture_output=True, text=True, timeout=600)  # fmt: skip
+        assert done.returncode == 0, done.stderr[-3000:]
+        report = json.loads(done.stdout.strip().splitlines()[-1])
+        assert report["code"] == 0
+        return report["traced"], load_sweep(tmp_path / name)
+
+    first, a = run("first", str(tmp_path / "cache"))
+    second, b = run("second", str(tmp_path / "cache"))
+    plain, c = run("plain", "off")
+    assert "exported__chunk_program" in first, first
+    assert not [name for name in second if name.startswith("exported_")], second
+    assert "run" in plain and not [name for name in plain if "chunk_program" in name], plain
+    for key in ("q", "v", "num_steps", "result"):
+        np.testing.assert_array_equal(a[key], b[key])
+        np.testing.assert_array_equal(a[key], c[key])
