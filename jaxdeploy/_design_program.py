@@ -148,9 +148,14 @@ def runs_spec(runs, devices, reads) -> DesignSpec:
     return DesignSpec(Described(value, description, "DesignRuns"))
 
 
+class _ReadsWhole(Exception):
+    """The objective looked at a run's outputs as a whole (`_Reading`)."""
+
+
 class _Reading(dict):
     """A mapping that holds every key, each a placeholder array of `shape`, and records the
-    keys read (`objective_reads`)."""
+    keys read (`objective_reads`). Looking at it as a whole (its keys, values, items, size)
+    raises `_ReadsWhole`: which names such an objective reads cannot be known."""
 
     def __init__(self, shape):
         super().__init__()
@@ -165,13 +170,23 @@ class _Reading(dict):
         self.read.add(name)
         return jnp.zeros(self.shape)
 
+    def get(self, name, default=None):
+        return self[name]
+
+    def _whole(self, *args, **kwargs):
+        raise _ReadsWhole
+
+    __iter__ = __len__ = keys = values = items = copy = _whole
+
 
 def objective_reads(objective, ts):
     """`(channels, events)`: the names of the run outputs `objective` reads, found by
     evaluating it abstractly (`jax.eval_shape`) on placeholders at the saved times `ts` with
     the phase boundary at the start (which names a feature reads does not depend on it); None
-    when that evaluation fails (then the runs return every output, and the objective's own
-    trace reports the problem).
+    (then the runs return every output) for an objective other than an `objectives.Objective`
+    of `Term`s (jaxdeploy's features, which read outputs by name), when it looks at the
+    outputs as a whole, or when that evaluation fails (the objective's own trace then
+    reports the problem).
 
     Why the runs return only these: an output nobody reads is left out of the compiled
     program (XLA removes the computation, and the loop's state that only it needs), which a
@@ -179,8 +194,10 @@ def objective_reads(objective, ts):
     took 1.75x the time of one returning what the paper's objective reads."""
     import jax
 
-    from .objectives import Deployment
+    from .objectives import Deployment, Objective, Term
 
+    if type(objective) is not Objective or any(type(t) is not Term for t in objective.terms):
+        return None
     ts = np.asarray(ts)
     channels, ideal, events = _Reading(ts.shape), _Reading(ts.shape), _Reading(())
 

@@ -503,3 +503,20 @@ def test_the_design_runs_return_what_the_objective_reads():
     assert channels == {"panel1_tip_vx", "panel1_tip_vy"}  # interval means of the velocity
     # Too short for two windows: the evaluation fails, every output is kept.
     assert objective_reads(parse_objective("panel2:peak_vibration=1"), ts[:11]) is None
+
+    # An objective of the user's own may read the outputs any way: all are kept.
+    def total(deployment):
+        return sum(jnp.sum(v) for v in deployment.channels.values())
+
+    assert objective_reads(total, ts) is None
+
+    class Whole(type(parse_objective("panel2:peak_vibration=1"))):
+        pass
+
+    assert objective_reads(Whole(parse_objective("panel2:peak_vibration=1").terms), ts) is None
+    # The placeholders refuse to be looked at whole (a feature iterating them gives None).
+    from jaxdeploy._design_program import _Reading, _ReadsWhole
+
+    for look in (list, len, lambda m: m.items(), lambda m: m.values(), lambda m: {**m}):
+        with pytest.raises(_ReadsWhole):
+            look(_Reading(()))
