@@ -9,24 +9,15 @@ import subprocess
 import sys
 
 import pytest
+from _traces import RECORD_TRACES
 
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-# The scripts' record of what JAX traced in their process: the names of the functions, from
-# JAX's own compile events (`jax.monitoring`), in `traced`.
-_RECORD_TRACES = """
-from jax import monitoring
-
-traced = []
-def record(event, start, end, **kwargs):
-    if event == "/jax/core/compile/jaxpr_trace_duration":
-        traced.append(kwargs.get("fun_name"))
-"""
 
 # A user's script: the scene, its initial state (an assembly program) and a run (the solve).
 # It prints the names of the functions JAX traced in this process and the run's output.
 _SCRIPT = (
-    _RECORD_TRACES
+    RECORD_TRACES
     + """
 import json, sys
 monitoring.register_event_time_span_listener(record)
@@ -131,7 +122,7 @@ def test_caches_called_after_equinox_warn_and_keep_the_compilation_cache(tmp_pat
 # no JAX operation outside them but the save times (JAX traces, lowers and looks up each one on
 # a process's first call: ~4 ms apiece, as much as the whole run of a short slider-crank).
 _RUN_ONLY_SCRIPT = (
-    _RECORD_TRACES
+    RECORD_TRACES
     + """
 import json, sys
 
@@ -181,7 +172,7 @@ def test_second_process_simulates_a_clearance_joint_without_tracing_anything(tmp
 # A fit's model (`jaxdeploy.fit`): the forward-mode Jacobian of the channels, the program a
 # fit evaluates at every Levenberg–Marquardt step (`fit._model_program`).
 _FIT_MODEL_SCRIPT = (
-    _RECORD_TRACES
+    RECORD_TRACES
     + """
 import json, sys
 monitoring.register_event_time_span_listener(record)
@@ -236,7 +227,7 @@ def test_a_fits_model_is_traced_by_the_first_process_only(tmp_path):
 # `jaxdeploy optimize` splits a 2-core CPU: the programs `_design_program.run_designs` (the
 # designs' runs) and `_design_program.objective_of` (their objective).
 _DESIGN_BATCH_SCRIPT = (
-    _RECORD_TRACES
+    RECORD_TRACES
     + """
 import json, sys
 monitoring.register_event_time_span_listener(record)
@@ -292,7 +283,8 @@ def test_a_design_batch_is_traced_by_the_first_process_only(tmp_path):
 
 # `jaxdeploy fit` with the tolerance its own to choose (noise given): the Jacobian's program is
 # made in a second thread while the main thread runs the start point (`commands.fit`).
-_FIT_COMMAND_SCRIPT = """
+# A command's script records what JAX traced as [function name, thread name] pairs.
+_RECORD_THREAD_TRACES = """
 import json, sys, threading
 from jax import monitoring
 
@@ -301,7 +293,25 @@ def record(event, start, end, **kwargs):
     if event == "/jax/core/compile/jaxpr_trace_duration":
         traced.append([kwargs.get("fun_name"), threading.current_thread().name])
 monitoring.register_event_time_span_listener(record)
+"""
 
+
+def _command(script, tmp_path, out, cache):
+    """`script`'s last line of output (JSON), run in a new process with `JAXDEPLOY_CACHE_DIR`
+    `cache` and `out` its argument."""
+    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
+    env["JAXDEPLOY_CACHE_DIR"] = cache
+    proc = subprocess.run(
+        [sys.executable, "-c", script, out],
+        env=env, capture_output=True, text=True, cwd=tmp_path,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+_FIT_COMMAND_SCRIPT = (
+    _RECORD_THREAD_TRACES
+    + """
 import numpy as np
 from jaxdeploy.cli import main
 from jaxdeploy.fit import synthesize
@@ -317,17 +327,11 @@ report = json.load(open(sys.argv[1] + "/fit.json"))
 print(json.dumps({"code": code, "traced": traced, "estimates": report["estimates"],
                   "errors": report["standard_errors"], "rtol": report["step_control"]["rtol"]}))
 """
+)
 
 
 def _fit_command(tmp_path, out, cache):
-    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
-    env["JAXDEPLOY_CACHE_DIR"] = cache
-    proc = subprocess.run(
-        [sys.executable, "-c", _FIT_COMMAND_SCRIPT, out],
-        env=env, capture_output=True, text=True, cwd=tmp_path,
-    )  # fmt: skip
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return _command(_FIT_COMMAND_SCRIPT, tmp_path, out, cache)
 
 
 @pytest.mark.slow  # ~1 CPU-min: two fits from empty caches
@@ -350,7 +354,7 @@ def test_the_fit_command_makes_its_jacobian_while_it_chooses_the_tolerance(tmp_p
 # `diffrax.ForwardMode`, as `jaxdeploy optimize --gradient pathwise` runs it): the program
 # `optimize._design_gradient`.
 _DESIGN_GRADIENT_SCRIPT = (
-    _RECORD_TRACES
+    RECORD_TRACES
     + """
 import json, sys
 monitoring.register_event_time_span_listener(record)
@@ -388,16 +392,9 @@ def test_a_design_gradient_is_traced_by_the_first_process_only(tmp_path):
 
 # `jaxdeploy optimize` with a smoothed gradient: the design batch's runs are made in a second
 # thread while `DesignProblem` runs the ideal reference (`commands.optimize`).
-_OPTIMIZE_COMMAND_SCRIPT = """
-import json, sys, threading
-from jax import monitoring
-
-traced = []
-def record(event, start, end, **kwargs):
-    if event == "/jax/core/compile/jaxpr_trace_duration":
-        traced.append([kwargs.get("fun_name"), threading.current_thread().name])
-monitoring.register_event_time_span_listener(record)
-
+_OPTIMIZE_COMMAND_SCRIPT = (
+    _RECORD_THREAD_TRACES
+    + """
 from jaxdeploy.cli import main
 
 code = main(["optimize", "--scene", "deploy_array", "--objective", "panel1:lock_time=1",
@@ -406,17 +403,11 @@ code = main(["optimize", "--scene", "deploy_array", "--objective", "panel1:lock_
 report = json.load(open(sys.argv[1] + "/result.json"))
 print(json.dumps({"code": code, "traced": traced, "history": report["history"]}))
 """
+)
 
 
 def _optimize_command(tmp_path, out, cache):
-    env = {k: v for k, v in os.environ.items() if k not in ("EQX_ON_ERROR", "JAXDEPLOY_CACHE_DIR")}
-    env["JAXDEPLOY_CACHE_DIR"] = cache
-    proc = subprocess.run(
-        [sys.executable, "-c", _OPTIMIZE_COMMAND_SCRIPT, out],
-        env=env, capture_output=True, text=True, cwd=tmp_path,
-    )  # fmt: skip
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return _command(_OPTIMIZE_COMMAND_SCRIPT, tmp_path, out, cache)
 
 
 @pytest.mark.slow  # ~2 CPU-min: two deploy_array optimisations from empty caches

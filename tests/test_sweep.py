@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 import pytest
+from _traces import TRACED_COMMAND
 
 from jaxdeploy.commands.sweep import parse_grid
 from jaxdeploy.sweep import grid_cases, load_sweep
@@ -362,24 +363,6 @@ def test_a_sharded_deploy_array_sweep_finishes(tmp_path):
     assert sorted(load_sweep(str(out))["case"]) == [0, 1, 2, 3]  # every case, once
 
 
-# A sweep run from Python as the command line runs it, recording what JAX traced (its compile
-# events' function names) and the sweep's exit code.
-_TRACED_SWEEP = """
-import json, sys
-from jax import monitoring
-
-traced = []
-def record(event, start, end, **kwargs):
-    if event == "/jax/core/compile/jaxpr_trace_duration":
-        traced.append(kwargs.get("fun_name"))
-monitoring.register_event_time_span_listener(record)
-
-from jaxdeploy.cli import main
-code = main(sys.argv[1:])
-print(json.dumps({"code": code, "traced": traced}))
-"""
-
-
 @pytest.mark.slow  # ~1 CPU-min: three sweep processes on four forced devices
 def test_a_sharded_sweeps_program_is_traced_by_the_first_process_only(tmp_path):
     """The vmapped chunk program, sharded over four devices, is kept by the program cache
@@ -391,7 +374,7 @@ def test_a_sharded_sweeps_program_is_traced_by_the_first_process_only(tmp_path):
         env = _env(tmp_path / "jax")
         env["JAXDEPLOY_CACHE_DIR"] = cache
         argv = _command(tmp_path / name)[3:]  # what follows `python -m jaxdeploy.cli`
-        done = subprocess.run([sys.executable, "-c", _TRACED_SWEEP, *argv], env=env,
+        done = subprocess.run([sys.executable, "-c", TRACED_COMMAND, *argv], env=env,
                               capture_output=True, text=True, timeout=600)  # fmt: skip
         assert done.returncode == 0, done.stderr[-3000:]
         report = json.loads(done.stdout.strip().splitlines()[-1])
