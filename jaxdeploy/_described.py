@@ -5,8 +5,9 @@ static fields enter that key through their `repr` (the tree structure's text). A
 as a scene or a design problem has no exact `repr`, so a program that closes over it cannot be
 kept. `Described` carries such an object beside an exact description of everything the trace
 reads from it (JSON text, written by its owner: `fit/_model_program.describe`,
-`_design_program.describe`): equal descriptions compare and hash equal (one trace per
-description, in JAX's caches and in the program cache), and the description is the `repr`.
+`_design_program.runs_spec`, `sweep._describe_chunk`; a scene's part by `scene_record`):
+equal descriptions compare and hash equal (one trace per description, in JAX's caches and in
+the program cache), and the description is the `repr`.
 Without a description (None) the value is compared by identity and printed with its address,
 which `_program_cache.key` refuses to keep: such a program is traced in each process.
 """
@@ -36,3 +37,37 @@ class Described:
         if self.description is None:
             return object.__repr__(self)  # "<... at 0x...>": not kept by the program cache
         return f"{self.kind}({self.description})"
+
+
+def scene_record(scene, values) -> dict | None:
+    """The written-down part a scene contributes to a description: its class and options and
+    `values` (parameter values, each a number: concrete numbers choose a scene's
+    composition), as `{"scene", "scene_options", "values"}`; None when they cannot be written
+    down exactly (a scene class outside jaxdeploy, whose code the program cache's key does
+    not hold; a value that is not a number, or is traced)."""
+    import numpy as np
+
+    cls = type(scene)
+    if not cls.__module__.startswith("jaxdeploy."):
+        return None
+    try:
+        numbers = {k: repr(float(v)) for k, v in values.items() if np.ndim(v) == 0}
+    except TypeError:  # a traced value
+        return None
+    if len(numbers) != len(values):
+        return None
+    return {
+        "scene": f"{cls.__module__}:{cls.__qualname__}",
+        "scene_options": scene.options,
+        "values": numbers,
+    }
+
+
+def dumps(record) -> str | None:
+    """`record` as a description (JSON, keys sorted), or None when JSON cannot hold it."""
+    import json
+
+    try:
+        return json.dumps(record, sort_keys=True, allow_nan=True)
+    except (TypeError, ValueError):
+        return None

@@ -32,57 +32,37 @@ subclass, to this module).
 
 `optimize`'s pathwise gradient of `DesignProblem.evaluate` (`optimize._design_gradient`) was
 likewise a closure (`solvers.tolerances_as_data`): its `gradient_spec` adds the box's bounds,
-the mode and the step control's structure to the problem's description (`describe`; the
+the mode and the step control's structure to the problem's description (the
 tolerances are data, as before: one program for every tolerance the search tries).
 """
 
 from __future__ import annotations
 
-import json
-
 import equinox as eqx
 import numpy as np
 
 from . import _program_cache
-from ._described import Described
+from ._described import Described, dumps, scene_record
 
 
 class DesignSpec(eqx.Module):
-    """What a program evaluates (`describe`), as the static part of its arguments."""
+    """What a program evaluates (its description: `runs_spec`, `objective_spec`,
+    `gradient_spec`), as the static part of its arguments."""
 
     static: Described = eqx.field(static=True)
 
 
-def describe_runs(runs, devices) -> str | None:
-    """The description that keys the runs' program (`optimize.DesignRuns`: module
-    docstring), or None when it cannot be written down exactly."""
-    record = _runs_record(runs)
-    if record is None:
-        return None
-    record["devices"] = len(devices)
-    return _dumps(record)
-
-
 def _runs_record(runs) -> dict | None:
-    scene = runs.scene
-    cls = type(scene)
-    if not cls.__module__.startswith("jaxdeploy."):
-        return None
-    try:
-        fixed = {k: float(v) for k, v in runs.fixed.items() if np.ndim(v) == 0}
-    except TypeError:  # a traced value
-        return None
-    if len(fixed) != len(runs.fixed):
-        return None
+    """What the runs' program reads of `runs` (`optimize.DesignRuns`: module docstring), or
+    None when it cannot be written down exactly."""
+    record = scene_record(runs.scene, runs.fixed)
     ts = np.linspace(0.0, runs.t_end, len(runs.ts))
-    if not np.array_equal(ts, runs.ts):
+    if record is None or not np.array_equal(ts, runs.ts):
         return None
     return {
-        "scene": f"{cls.__module__}:{cls.__qualname__}",
-        "scene_options": scene.options,
+        **record,
         "t_end": repr(runs.t_end),
         "n_save": len(runs.ts),
-        "fixed": {k: repr(v) for k, v in fixed.items()},
         "control": repr(runs.control),
         "adjoint": repr(runs.adjoint),
     }
@@ -103,49 +83,34 @@ def _objective_record(problem) -> dict | None:
     }
 
 
-def _dumps(record) -> str | None:
-    try:
-        return json.dumps(record, sort_keys=True, allow_nan=True)
-    except (TypeError, ValueError):
-        return None
-
-
-def describe(problem, devices) -> str | None:
-    """The description of a whole design problem's evaluation (its runs' and its
-    objective's), or None when it cannot be written down exactly."""
-    runs, objective = _runs_record(problem.runs), _objective_record(problem)
-    if runs is None or objective is None:
-        return None
-    return _dumps({**runs, **objective, "devices": len(devices)})
-
-
 def gradient_spec(problem, box, mode: str, structure) -> DesignSpec:
     """The `DesignSpec` of `problem`'s pathwise gradient in the box `box` (`optimize.Box`) by
     `mode` ("forward" or "reverse") at the step control `structure` (its tolerances
-    placeholders: `solvers.split_tolerances`)."""
-    problem_description = describe(problem, ())
+    placeholders: `solvers.split_tolerances`): described by what its runs' and its
+    objective's programs read, the box's bounds, the mode and the structure."""
+    runs, objective = _runs_record(problem.runs), _objective_record(problem)
     description = None
-    if problem_description is not None:
-        record = {
-            "problem": json.loads(problem_description),
+    if runs is not None and objective is not None:
+        description = dumps({
+            "problem": {**runs, **objective},
             "bounds": {k: [repr(float(lo)), repr(float(hi))] for k, (lo, hi) in box.bounds.items()},
             "mode": mode,
             "structure": repr(structure),
-        }
-        description = json.dumps(record, sort_keys=True)
+        })  # fmt: skip
     return DesignSpec(Described((problem, box, mode, structure), description, "DesignGradient"))
 
 
-def runs_spec(runs, devices, reads) -> DesignSpec:
+def runs_spec(runs, objective, devices) -> DesignSpec:
     """The `DesignSpec` of the designs' runs (`optimize.DesignRuns`) over `devices`, returning
-    the outputs `reads` (`objective_reads`; None: every output)."""
-    value = (runs, tuple(devices), reads)
-    description = describe_runs(runs, devices)
-    if description is not None:
-        record = json.loads(description)
+    the outputs `objective` reads (`objective_reads`; all of them when that is unknown)."""
+    reads = objective_reads(objective, runs.ts)
+    record = _runs_record(runs)
+    description = None
+    if record is not None:
+        record["devices"] = len(devices)
         record["reads"] = None if reads is None else [sorted(r) for r in reads]
-        description = _dumps(record)
-    return DesignSpec(Described(value, description, "DesignRuns"))
+        description = dumps(record)
+    return DesignSpec(Described((runs, tuple(devices), reads), description, "DesignRuns"))
 
 
 class _ReadsWhole(Exception):
@@ -215,7 +180,7 @@ def objective_reads(objective, ts):
 def objective_spec(problem) -> DesignSpec:
     """The `DesignSpec` of `problem`'s objective of its runs' outputs."""
     record = _objective_record(problem)
-    description = None if record is None else _dumps(record)
+    description = None if record is None else dumps(record)
     return DesignSpec(Described(problem, description, "DesignObjective"))
 
 

@@ -198,9 +198,7 @@ class DesignProblem:
         self.runs = DesignRuns(
             scene, t_end, n_save=n_save, fixed=fixed, control=control, adjoint=adjoint
         )
-        self.scene, self.objective, self.t_end = scene, objective, self.runs.t_end
-        self.adjoint, self.fixed = adjoint, self.runs.fixed
-        self.control, self.ts = self.runs.control, self.runs.ts
+        self.objective = objective
         # The design runs' step control, resolved (what results record).
         self.step_control = step_control(scene, self.control)
         if ideal_scene == "auto":
@@ -231,6 +229,14 @@ class DesignProblem:
             self.lock_time = 0.0
         if not math.isfinite(self.lock_time):
             raise ValueError(f"t_end = {self.t_end} s: the ideal mechanism does not lock by then")
+
+    # The run settings are the runs' (`DesignRuns`).
+    scene = property(lambda self: self.runs.scene)
+    t_end = property(lambda self: self.runs.t_end)
+    fixed = property(lambda self: self.runs.fixed)
+    control = property(lambda self: self.runs.control)
+    ts = property(lambda self: self.runs.ts)
+    adjoint = property(lambda self: self.runs.adjoint)
 
     def params(self, x: Mapping) -> dict:
         return self.runs.params(x)
@@ -389,8 +395,7 @@ class BatchObjective:
         if type(problem) is DesignProblem:
             # Module-level programs the program cache keeps (`_design_program`); a subclass
             # may evaluate otherwise than its description says: traced per instance below.
-            reads = _design_program.objective_reads(problem.objective, problem.ts)
-            runs = _design_program.runs_spec(problem.runs, self.devices, reads)
+            runs = _design_program.runs_spec(problem.runs, problem.objective, self.devices)
             objective = _design_program.objective_spec(problem)
             self._run = partial(_design_program.call, runs, objective)
             return
@@ -432,8 +437,7 @@ def prepare_batch(
 
     devices = list(jax.devices() if devices is None else devices)
     designs = _padded({name: np.zeros(size) for name in names}, len(devices))
-    reads = _design_program.objective_reads(objective, runs.ts)
-    spec = _design_program.runs_spec(runs, devices, reads)
+    spec = _design_program.runs_spec(runs, objective, devices)
     try:
         with _program_cache.ahead_of_time(), _program_cache.when_traced(on_traced):
             _design_program.run(spec, designs)

@@ -46,7 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._cores import usable_cores
-from ._described import Described
+from ._described import Described, dumps, scene_record
 from ._validation import check_positive
 from .batch import batch_function, stack_cases, step_control
 from .io import (
@@ -227,30 +227,16 @@ def _describe_chunk(scene, varied, shared, control, sharding, options) -> str | 
     chunk is split over and `batch_function`'s other options; None when it cannot be
     written down exactly (a scene class outside jaxdeploy, a value that is not a number,
     several processes)."""
-    import json
-
-    cls = type(scene)
-    if jax.process_count() > 1 or not cls.__module__.startswith("jaxdeploy."):
+    record = scene_record(scene, shared)
+    if jax.process_count() > 1 or record is None:
         return None
-    try:
-        values = {k: repr(float(v)) for k, v in shared.items() if np.ndim(v) == 0}
-    except TypeError:  # a traced value
-        return None
-    if len(values) != len(shared):
-        return None
-    record = {
-        "scene": f"{cls.__module__}:{cls.__qualname__}",
-        "scene_options": scene.options,
+    return dumps({
+        **record,
         "varied": list(varied),
-        "shared": values,
         "control": repr(control),
         "devices": None if sharding is None else int(sharding.mesh.devices.size),
         "options": {k: repr(v) for k, v in sorted(options.items())},
-    }
-    try:
-        return json.dumps(record, sort_keys=True, allow_nan=True)
-    except (TypeError, ValueError):
-        return None
+    })  # fmt: skip
 
 
 @eqx.filter_jit
@@ -274,13 +260,12 @@ def _kept_batch_function(
     as host arrays: the kept program lays them out over the devices it was made for."""
     from . import _program_cache
 
-    plain = batch_function(scene, varied, shared, t_end, ts, control=control,
-                           evaluate=_wrap(evaluate), sharding=sharding, **options)  # fmt: skip
     description = None
     if evaluate is None and _program_cache.folder() is not None:
         description = _describe_chunk(scene, varied, shared, control, sharding, options)
     if description is None:
-        return plain
+        return batch_function(scene, varied, shared, t_end, ts, control=control,
+                              evaluate=_wrap(evaluate), sharding=sharding, **options)  # fmt: skip
     value = (scene, tuple(varied), dict(shared), control, sharding, dict(options))
     spec = _ChunkSpec(Described(value, description, "SweepChunk"))
     default_t_end, default_ts = float(t_end), np.asarray(ts, dtype=float)

@@ -458,8 +458,7 @@ def test_a_design_batchs_programs_are_keyed_by_descriptions():
             scene or DeployArray(), parse_objective(objective), 0.7, fixed=fixed,
             ideal_scene=None, n_save=701,
         )  # fmt: skip
-        reads = _design_program.objective_reads(problem.objective, problem.ts)
-        runs = _design_program.runs_spec(problem.runs, jax.devices(), reads)
+        runs = _design_program.runs_spec(problem.runs, problem.objective, jax.devices())
         return runs, _design_program.objective_spec(problem)
 
     assert specs() == specs() and hash(specs()) == hash(specs())
